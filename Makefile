@@ -1,0 +1,40 @@
+# Everything a fresh machine needs: `make demo`, `make test`, `make bench`.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+GL := $(VENV)/mujoco_gl
+RUN = MUJOCO_GL=$$(cat $(GL)) $(PY)
+
+.PHONY: setup demo test bench reproduce clean
+
+setup: $(GL)
+
+# torch first, from the CPU wheel on local disk: otherwise a dependency pulls a CUDA build.
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet torch==2.13.0
+	$(PY) -m pip install --quiet -e '.[dev]'
+	touch $@
+
+# EGL by default; OSMesa (apt libosmesa6) only when EGL cannot render here.
+$(GL): $(STAMP)
+	@$(PY) -m envs._gl > $@ 2>/dev/null || { \
+	  echo "EGL cannot render: installing libosmesa6"; \
+	  (apt-get update -qq && apt-get install -y -qq libosmesa6) >/dev/null; \
+	  $(PY) -m envs._gl > $@; }
+	@echo "MUJOCO_GL=$$(cat $@)"
+
+demo: setup
+	$(RUN) scripts/demo.py
+
+test: setup
+	$(RUN) -m pytest -n 2 -q
+
+bench: setup
+	$(RUN) scripts/bench_env.py
+	$(RUN) scripts/bench_gse.py
+
+clean:
+	rm -rf $(VENV) results .pytest_cache

@@ -1,0 +1,1 @@
+"""Agents that navigate on the pose belief."""

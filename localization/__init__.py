@@ -1,0 +1,1 @@
+"""Localization toolkit: features, GSE regression, baselines, intrinsic dimension, EKF."""
