@@ -20,10 +20,10 @@ $(STAMP): pyproject.toml
 
 # EGL by default; OSMesa (apt libosmesa6) only when EGL cannot render here.
 $(GL): $(STAMP)
-	@$(PY) -m envs._gl > $@ 2>/dev/null || { \
+	@$(PY) -c "from envs._gl import main; raise SystemExit(main())" > $@ 2>/dev/null || { \
 	  echo "EGL cannot render: installing libosmesa6"; \
 	  (apt-get update -qq && apt-get install -y -qq libosmesa6) >/dev/null; \
-	  $(PY) -m envs._gl > $@; }
+	  $(PY) -c "from envs._gl import main; raise SystemExit(main())" > $@; }
 	@echo "MUJOCO_GL=$$(cat $@)"
 
 demo: setup
