@@ -1,0 +1,133 @@
+"""Process noise Q of the motion model F, estimated from recorded motion.
+
+A recorded drive gives true poses ``theta_t`` and the commanded controls
+``U_t``. The one-step prediction error of F,
+
+    e_t = theta_{t+1} - F(theta_t, U_t)          (heading wrapped),
+
+is rotated into the robot's body frame at ``theta_t`` (so that "along track"
+and "cross track" errors keep their meaning whatever the heading) and its
+second moment gives the body-frame covariance ``Q_body``. The world-frame Q
+used by the filter at pose ``x`` is
+
+    Q(x) = T(yaw) Q_body T(yaw)^T,     T(yaw) = [[cos, -sin, 0], [sin, cos, 0], [0, 0, 1]].
+
+The second moment (not the centred covariance) is used so that a systematic
+bias of F (wheel slip, actuator lag) is counted as noise instead of ignored.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from envs.motion_model import wrap_angle
+
+
+class MotionModel(Protocol):
+    def predict(self, pose: ArrayLike, u: ArrayLike) -> NDArray[np.float64]: ...
+
+
+def body_rotation(yaw: float) -> NDArray[np.float64]:
+    """T(yaw), the (3, 3) rotation taking body-frame pose errors to the world frame."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def prediction_errors(model: MotionModel, poses: ArrayLike, controls: ArrayLike,
+                      ) -> NDArray[np.float64]:
+    """Body-frame one-step errors of F on a recorded drive.
+
+    Parameters
+    ----------
+    model : object with ``predict(pose, u)``
+    poses : array-like of shape (T + 1, 3)
+        True poses theta_0 .. theta_T.
+    controls : array-like of shape (T, 2)
+        Commanded controls U_0 .. U_{T-1} (U_t moves theta_t to theta_{t+1}).
+
+    Returns
+    -------
+    errors : ndarray of shape (T, 3)
+        ``T(yaw_t)^T (theta_{t+1} - F(theta_t, U_t))`` with the heading wrapped.
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    controls = np.asarray(controls, dtype=np.float64)
+    if poses.ndim != 2 or poses.shape[1] != 3:
+        raise ValueError(f"poses must have shape (T+1, 3), got {poses.shape}")
+    if controls.ndim != 2 or controls.shape[1] != 2:
+        raise ValueError(f"controls must have shape (T, 2), got {controls.shape}")
+    if len(poses) != len(controls) + 1:
+        raise ValueError(
+            f"need one more pose than controls, got {len(poses)} poses and {len(controls)} controls"
+        )
+    if not (np.all(np.isfinite(poses)) and np.all(np.isfinite(controls))):
+        raise ValueError("poses and controls must be finite (found NaN or inf)")
+    errors = np.empty((len(controls), 3))
+    for t, u in enumerate(controls):
+        e = poses[t + 1] - model.predict(poses[t], u)
+        e[2] = wrap_angle(e[2])
+        errors[t] = body_rotation(poses[t, 2]).T @ e
+    return errors
+
+
+def estimate_process_noise(model: MotionModel, poses: ArrayLike, controls: ArrayLike,
+                           episode_starts: ArrayLike | None = None,
+                           floor: float = 1e-8) -> NDArray[np.float64]:
+    """Estimate the body-frame process noise ``Q_body`` (3, 3) from recorded motion.
+
+    Parameters
+    ----------
+    model, poses, controls :
+        See :func:`prediction_errors`.
+    episode_starts : array-like of bool, shape (T,), optional
+        Marks transitions that cross an episode boundary (a reset); they are
+        excluded.
+    floor : float
+        Added to the diagonal so Q stays positive definite.
+    """
+    errors = prediction_errors(model, poses, controls)
+    if episode_starts is not None:
+        errors = errors[~np.asarray(episode_starts, dtype=bool)]
+    if len(errors) < 10:
+        raise ValueError(f"need at least 10 recorded transitions to estimate Q, got {len(errors)}")
+    Q = errors.T @ errors / len(errors)
+    return 0.5 * (Q + Q.T) + floor * np.eye(3)
+
+
+def world_process_noise(Q_body: NDArray[np.float64], pose: ArrayLike) -> NDArray[np.float64]:
+    """Q(x) = T(yaw) Q_body T(yaw)^T at the pose ``x``."""
+    T = body_rotation(float(np.asarray(pose)[2]))
+    return T @ Q_body @ T.T
+
+
+def record_motion(env: Any, n_steps: int, seed: int, policy: Any = None,
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """Drive ``env`` and record true poses and the commanded controls.
+
+    ``policy(obs, info) -> action`` (default: uniformly random actions, seeded).
+    Returns ``poses`` (n_steps + 1, 3), ``controls`` (n_steps, 2) and
+    ``episode_starts`` (n_steps,) marking transitions across a reset; the
+    clipped action is recorded, since that is what the robot was commanded.
+    """
+    space = env.action_space
+    space.seed(seed)
+    obs, info = env.reset(seed=seed)
+    poses, controls, starts = [info["pose"]], [], []
+    for _ in range(n_steps):
+        action = space.sample() if policy is None else policy(obs, info)
+        action = np.clip(np.asarray(action, dtype=np.float64), space.low, space.high)
+        obs, _, terminated, truncated, info = env.step(action)
+        controls.append(action)
+        starts.append(False)
+        if terminated or truncated:
+            # the transition into a reset is not motion: record it as a boundary
+            poses.append(info["pose"])
+            obs, info = env.reset()
+            controls.append(np.zeros_like(action))
+            starts.append(True)
+        poses.append(info["pose"])
+    poses_a = np.asarray(poses, dtype=np.float64)
+    return poses_a, np.asarray(controls, dtype=np.float64), np.asarray(starts, dtype=bool)
