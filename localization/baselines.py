@@ -30,7 +30,8 @@ from sklearn.model_selection import GridSearchCV, KFold
 from sklearn.neighbors import KNeighborsRegressor, NearestNeighbors
 from sklearn.utils.validation import check_is_fitted
 
-from envs.motion_model import wrap_angle
+from localization.metrics import wrap_angle
+
 
 Array = NDArray[np.float64]
 

@@ -20,11 +20,20 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from envs.motion_model import wrap_angle
 
 Array = NDArray[np.float64]
 
 __all__ = ["angular_error", "angular_rmse", "rmse", "rrmse", "wrap_angle"]
+
+
+def wrap_angle(a: ArrayLike) -> Array:
+    """Wrap angles to (-pi, pi]; same formula as ``envs.motion_model.wrap_angle``.
+
+    Defined here so that importing the metrics does not import the ``envs``
+    package (whose ``__init__`` sets up rendering).
+    """
+    a = np.asarray(a, dtype=np.float64)
+    return np.pi - np.mod(np.pi - a, 2.0 * np.pi)
 
 
 def _as_pair(a: ArrayLike, b: ArrayLike, names: tuple[str, str]) -> tuple[Array, Array]:
