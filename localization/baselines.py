@@ -257,7 +257,8 @@ class KernelRegressor(_PoseRegressorBase):
         self._E = self._encode(Y)
         self._nn = None
         if self.n_neighbors_ is not None:
-            self._nn = NearestNeighbors(n_neighbors=self.n_neighbors_).fit(self._Xs)
+            self._nn = NearestNeighbors(n_neighbors=self.n_neighbors_,
+                                        algorithm="brute").fit(self._Xs)
 
     def _restore(self, X: Array, Y: Array, fitted: dict[str, Any]) -> None:
         X, Y = self._validate_fit(X, Y)
@@ -381,6 +382,9 @@ class RetrievalRegressor(_PoseRegressorBase):
         Number of folds for ``n_neighbors="cv"``.
     random_state : int, default=0
         Seed of the fold shuffling.
+    algorithm : str, default="brute"
+        Neighbour search of ``KNeighborsRegressor``; brute force (BLAS) is the fastest
+        for image features (tens to thousands of dimensions, where trees do not help).
 
     Attributes
     ----------
@@ -397,7 +401,7 @@ class RetrievalRegressor(_PoseRegressorBase):
     def __init__(self, n_neighbors: int | str = 1, weights: str = "distance",
                  periodic: Sequence[int] = (), standardize: bool = True,
                  k_grid: Sequence[int] = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32), cv: int = 5,
-                 random_state: int = 0) -> None:
+                 random_state: int = 0, algorithm: str = "brute") -> None:
         self.n_neighbors = n_neighbors
         self.weights = weights
         self.periodic = periodic
@@ -405,6 +409,7 @@ class RetrievalRegressor(_PoseRegressorBase):
         self.k_grid = k_grid
         self.cv = cv
         self.random_state = random_state
+        self.algorithm = algorithm
 
     def fit(self, X: ArrayLike, Y: ArrayLike) -> "RetrievalRegressor":
         """Index the training features.
@@ -429,7 +434,8 @@ class RetrievalRegressor(_PoseRegressorBase):
             ks = sorted({int(k) for k in self.k_grid if 1 <= int(k) <= n_fit})
             if not ks:
                 raise ValueError(f"no k in k_grid={tuple(self.k_grid)} fits {n_fit} samples per fold")
-            search = GridSearchCV(KNeighborsRegressor(weights=self.weights),
+            search = GridSearchCV(KNeighborsRegressor(weights=self.weights,
+                                                      algorithm=self.algorithm),
                                   {"n_neighbors": ks}, scoring="neg_mean_squared_error",
                                   cv=KFold(self.cv, shuffle=True, random_state=self.random_state))
             search.fit(Xs, E)
@@ -460,8 +466,8 @@ class RetrievalRegressor(_PoseRegressorBase):
     def _set_data(self, X: Array, Y: Array) -> None:
         Xs, E = self._prepare(X, Y)
         self.X_train_, self.Y_train_ = X, Y
-        self.knn_ = KNeighborsRegressor(n_neighbors=self.n_neighbors_,
-                                        weights=self.weights).fit(Xs, E)
+        self.knn_ = KNeighborsRegressor(n_neighbors=self.n_neighbors_, weights=self.weights,
+                                        algorithm=self.algorithm).fit(Xs, E)
 
     def _restore(self, X: Array, Y: Array, fitted: dict[str, Any]) -> None:
         X, Y = self._validate_fit(X, Y)
