@@ -1,10 +1,36 @@
 """AppearanceNav: a MuJoCo Gymnasium city for appearance-based localization.
 
 Importing :mod:`envs` chooses the offscreen OpenGL backend (``envs._gl``)
-before MuJoCo is imported.
+before MuJoCo is imported, and registers ``AppearanceNav-v0``.
 """
 
 from envs import _gl  # noqa: F401  (must run before mujoco is imported)
 from envs.motion_model import UnicycleModel, wrap_angle
 
-__all__ = ["UnicycleModel", "wrap_angle"]
+import gymnasium as gym  # noqa: E402
+
+from envs.appearance_nav import AppearanceNavEnv  # noqa: E402
+from envs.cameras import CAMERAS, make_camera, register_camera  # noqa: E402
+from envs.datasets import collect_dataset, load_dataset, save_dataset  # noqa: E402
+from envs.scene import City, generate_city  # noqa: E402
+
+if "AppearanceNav-v0" not in gym.registry:
+    gym.register(
+        id="AppearanceNav-v0",
+        entry_point="envs.appearance_nav:AppearanceNavEnv",
+        max_episode_steps=500,
+    )
+
+__all__ = [
+    "AppearanceNavEnv",
+    "CAMERAS",
+    "City",
+    "UnicycleModel",
+    "collect_dataset",
+    "generate_city",
+    "load_dataset",
+    "make_camera",
+    "register_camera",
+    "save_dataset",
+    "wrap_angle",
+]

@@ -1,0 +1,276 @@
+"""``AppearanceNav-v0``: drive a differential-drive robot through a generated city.
+
+The robot sees the city only through its camera; the true pose is reported in
+``info["pose"]`` for training localizers and for evaluation, never in the
+observation.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import ArrayLike, NDArray
+
+from envs.cameras import TopDownView, check_image_size, make_camera
+from envs.motion_model import UnicycleModel, wrap_angle
+from envs.robot import ACTUATOR_XML, HALF_TRACK, ROBOT_GEOMS, ROBOT_RADIUS, ROBOT_XML, WHEEL_RADIUS
+from envs.scene import City, generate_city
+
+__all__ = ["AppearanceNavEnv"]
+
+Obs = dict[str, NDArray[Any]]
+
+
+class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
+    """Reach a goal on the streets of a procedurally generated MuJoCo city.
+
+    Parameters
+    ----------
+    scene_seed : int
+        Names the city (``envs.scene.generate_city``); different seeds give different cities.
+    camera : str
+        A camera registered in ``envs.cameras.CAMERAS`` ("perspective", and "fisheye" /
+        "catadioptric" when ``envs.cube_camera`` is present).
+    image_size : (H, W) ints in [16, 1024].
+    max_episode_steps : int or None
+        Truncate after this many steps (``None``: never; ``gymnasium.make`` adds a ``TimeLimit``).
+    motion_noise : float >= 0
+        Scale of the actuation error: each wheel speed command ``q`` becomes
+        ``q (1 + s e1) + s * ADDITIVE_WHEEL_NOISE * e2`` with standard normal ``e1, e2``
+        drawn from ``self.np_random``. 0 leaves only the physics (inertia, contacts, slip).
+    render_mode : "rgb_array" or None
+        ``render()`` returns a top-down (north-up) map with the robot and the goal.
+    city_size, block_size, street_width : float
+        City layout in metres (default 20 x 20 m, 4 m blocks, 2 m streets).
+    frame_skip : int
+        Physics steps (0.005 s each) per env step; ``dt = 0.005 * frame_skip`` (default 0.1 s).
+
+    Notes
+    -----
+    Action ``U = [v, w]``: commanded linear (m/s) and angular (rad/s) velocity in the Box
+    ``[-1, 1]^2`` (float32). Finite out-of-range actions are clipped to the Box; NaN/inf or
+    a shape other than (2,) raise ``ValueError``. Observation ``{"image": (H, W, 3) uint8,
+    "goal": (2,) float32 world position}``. ``info``: ``pose`` [x, y, yaw] float64,
+    ``collision`` (robot touched a building or the city's invisible boundary wall during the step), ``distance_to_goal``,
+    ``control`` (the clipped U applied). Reward: decrease of the distance to the goal
+    minus ``STEP_COST`` minus ``COLLISION_PENALTY`` on collision; terminated within
+    ``GOAL_RADIUS`` of the goal.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    V_MAX = 1.0  # m/s
+    W_MAX = 1.0  # rad/s
+    GOAL_RADIUS = 0.5  # m
+    STEP_COST = 0.01
+    COLLISION_PENALTY = 0.1
+    ADDITIVE_WHEEL_NOISE = 2.0  # rad/s of wheel speed per unit motion_noise
+    MIN_GOAL_DISTANCE = 2.0  # m, for random goals
+
+    def __init__(
+        self,
+        scene_seed: int = 0,
+        camera: str = "perspective",
+        image_size: tuple[int, int] = (64, 64),
+        max_episode_steps: int | None = None,
+        motion_noise: float = 0.0,
+        render_mode: str | None = "rgb_array",
+        city_size: float = 20.0,
+        block_size: float = 4.0,
+        street_width: float = 2.0,
+        frame_skip: int = 20,
+    ) -> None:
+        self.image_size = check_image_size(image_size)
+        if not (np.isfinite(motion_noise) and motion_noise >= 0):
+            raise ValueError(f"motion_noise must be a finite number >= 0, got {motion_noise}")
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        if max_episode_steps is not None and max_episode_steps < 1:
+            raise ValueError(f"max_episode_steps must be >= 1 or None, got {max_episode_steps}")
+        if int(frame_skip) != frame_skip or frame_skip < 1:
+            raise ValueError(f"frame_skip must be a positive integer, got {frame_skip}")
+        self.render_mode = render_mode
+        self.motion_noise = float(motion_noise)
+        self.max_episode_steps = max_episode_steps
+        self.frame_skip = int(frame_skip)
+
+        self.city: City = generate_city(scene_seed, city_size, block_size, street_width)
+        self.model = mujoco.MjModel.from_xml_string(self.city.to_mjcf(ROBOT_XML, "", ACTUATOR_XML))
+        self.data = mujoco.MjData(self.model)
+        self.dt = self.model.opt.timestep * self.frame_skip
+        self.motion_model = UnicycleModel(self.dt)
+        self.camera_name = camera
+        self._camera = make_camera(camera, self.model, self.image_size)
+        self._top_down: TopDownView | None = None
+        self._init_ids()
+
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+        lo, hi = self.city.bounds
+        self.observation_space = spaces.Dict(
+            {
+                "image": spaces.Box(0, 255, (*self.image_size, 3), np.uint8),
+                "goal": spaces.Box(np.float32(lo), np.float32(hi), (2,), np.float32),
+            }
+        )
+        self._goal = np.zeros(2)
+        self._steps = 0
+        self._distance = 0.0
+
+    # ------------------------------------------------------------------ setup
+    def _init_ids(self) -> None:
+        m = self.model
+        self._root_qpos = m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "root")]
+        self._goal_mocap = m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "goal")]
+        self._is_building = np.array(
+            [(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or "").startswith(("building", "wall"))
+             for g in range(m.ngeom)]
+        )
+        self.robot_geom_ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, n) for n in ROBOT_GEOMS]
+
+    # ------------------------------------------------------------------ API
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Obs, dict[str, Any]]:
+        """Reset the robot (``options["pose"]`` = [x, y, yaw] or random) and the goal
+        (``options["goal"]`` = [x, y] or a random street point).
+
+        Raises
+        ------
+        ValueError
+            If the pose or goal is malformed, inside a building or outside the city.
+        """
+        super().reset(seed=seed)
+        options = options or {}
+        mujoco.mj_resetData(self.model, self.data)
+        if options.get("pose") is not None:
+            pose = self._check_point(options["pose"], 3, "pose", ROBOT_RADIUS)
+        else:
+            pose = self.city.random_free_pose(self.np_random, margin=ROBOT_RADIUS + 0.1)
+        if options.get("goal") is not None:
+            self._goal = self._check_point(options["goal"], 2, "goal", 0.0)
+        else:
+            self._goal = self._random_goal(pose[:2])
+        self.data.mocap_pos[self._goal_mocap, :2] = self._goal
+        self.set_pose(pose)
+        self._steps = 0
+        self._distance = self._distance_to_goal()
+        return self._obs(), self._info(collision=False, control=np.zeros(2))
+
+    def step(self, action: ArrayLike) -> tuple[Obs, float, bool, bool, dict[str, Any]]:
+        """Apply ``U = [v, w]`` for ``dt`` seconds (see the class notes for clipping and errors)."""
+        u = self._check_action(action)
+        self.data.ctrl[:] = self._wheel_speeds(u)
+        collision = False
+        for _ in range(self.frame_skip):
+            mujoco.mj_step(self.model, self.data)
+            collision = collision or self._building_contact()
+        self._steps += 1
+        distance = self._distance_to_goal()
+        reward = (self._distance - distance) - self.STEP_COST - self.COLLISION_PENALTY * collision
+        self._distance = distance
+        terminated = distance < self.GOAL_RADIUS
+        truncated = self.max_episode_steps is not None and self._steps >= self.max_episode_steps
+        return self._obs(), float(reward), bool(terminated), bool(truncated), self._info(collision, u)
+
+    def render(self) -> NDArray[np.uint8] | None:
+        """Return a top-down view (north up) of the city, robot and goal, or None without a render mode."""
+        if self.render_mode is None:
+            return None
+        if self._top_down is None:
+            self._top_down = TopDownView(self.city)
+        return self._top_down.draw(self.pose, self._goal)
+
+    def close(self) -> None:
+        """Close the camera's renderer (idempotent)."""
+        if getattr(self, "_camera", None) is not None:
+            self._camera.close()
+            self._camera = None  # type: ignore[assignment]
+
+    # ------------------------------------------------------------------ pose
+    @property
+    def pose(self) -> NDArray[np.float64]:
+        """The true pose ``[x, y, yaw]`` of the robot's free joint, float64 (3,)."""
+        q = self.data.qpos[self._root_qpos : self._root_qpos + 7]
+        qw, qx, qy, qz = q[3:7]  # heading of the body x axis projected on the ground
+        yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        return np.array([q[0], q[1], float(wrap_angle(yaw))])
+
+    @property
+    def goal(self) -> NDArray[np.float64]:
+        """The goal position [x, y], float64 (2,)."""
+        return self._goal.copy()
+
+    def set_pose(self, pose: ArrayLike) -> None:
+        """Teleport the robot to ``pose`` at rest (no validity check) and run ``mj_forward``."""
+        x, y, yaw = np.asarray(pose, dtype=np.float64)
+        a = self._root_qpos
+        self.data.qpos[a : a + 7] = [x, y, WHEEL_RADIUS, np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]
+        self.data.qvel[:] = 0.0
+        self.data.ctrl[:] = 0.0
+        mujoco.mj_forward(self.model, self.data)
+
+    def render_camera(self) -> NDArray[np.uint8]:
+        """Return the camera image at the current state, (H, W, 3) uint8."""
+        return self._camera.render(self.data)
+
+    # ------------------------------------------------------------------ helpers
+    def _obs(self) -> Obs:
+        return {"image": self._camera.render(self.data), "goal": self._goal.astype(np.float32)}
+
+    def _info(self, collision: bool, control: NDArray[np.float64]) -> dict[str, Any]:
+        return {
+            "pose": self.pose,
+            "collision": bool(collision),
+            "distance_to_goal": float(self._distance_to_goal()),
+            "control": np.asarray(control, dtype=np.float64),
+        }
+
+    def _distance_to_goal(self) -> float:
+        return float(np.hypot(*(self.pose[:2] - self._goal)))
+
+    def _building_contact(self) -> bool:
+        n = self.data.ncon
+        return bool(n) and bool(self._is_building[self.data.contact.geom[:n]].any())
+
+    def _wheel_speeds(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        v, w = u
+        q = np.array([v - w * HALF_TRACK, v + w * HALF_TRACK]) / WHEEL_RADIUS  # left, right (rad/s)
+        if self.motion_noise > 0:
+            e = self.np_random.standard_normal(4)
+            q = q * (1.0 + self.motion_noise * e[:2]) + self.motion_noise * self.ADDITIVE_WHEEL_NOISE * e[2:]
+        return q
+
+    def _check_action(self, action: ArrayLike) -> NDArray[np.float64]:
+        try:
+            u = np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"action must be numeric with shape (2,) [v, w], got {action!r}") from None
+        if u.shape != (2,):
+            raise ValueError(f"action must have shape (2,) [v, w], got shape {u.shape}")
+        if not np.all(np.isfinite(u)):
+            raise ValueError(f"action must be finite, got NaN or inf in {u}")
+        return np.clip(u, [-self.V_MAX, -self.W_MAX], [self.V_MAX, self.W_MAX])
+
+    def _check_point(self, value: ArrayLike, dim: int, what: str, margin: float) -> NDArray[np.float64]:
+        p = np.asarray(value, dtype=np.float64)
+        if p.shape != (dim,):
+            raise ValueError(f"{what} must have shape ({dim},), got {p.shape}")
+        if not np.all(np.isfinite(p)):
+            raise ValueError(f"{what} must be finite, got {p}")
+        lo, hi = self.city.bounds
+        if not (lo + margin <= p[0] <= hi - margin and lo + margin <= p[1] <= hi - margin):
+            raise ValueError(f"{what} {p[:2]} is outside the city [{lo}, {hi}]^2 (margin {margin} m)")
+        if not self.city.is_free(p[0], p[1], margin):
+            raise ValueError(f"{what} {p[:2]} is inside a building (needs {margin} m clearance)")
+        if dim == 3:
+            p[2] = wrap_angle(p[2])
+        return p
+
+    def _random_goal(self, start: NDArray[np.float64]) -> NDArray[np.float64]:
+        for _ in range(1000):
+            g = self.city.random_street_point(self.np_random)
+            if np.hypot(*(g - start)) >= self.MIN_GOAL_DISTANCE:
+                return g
+        return g

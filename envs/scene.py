@@ -1,0 +1,374 @@
+"""A procedurally generated city: street grid, box buildings, street graph, MJCF.
+
+The city is a square ``[-city_size/2, city_size/2]^2`` (metres) cut by a regular
+grid of streets of width ``street_width``; the streets along the border form a
+ring, so every block is surrounded by streets. Each block holds one to four
+box buildings of random footprint, height, colour and window texture, and a
+few blocks hold a tall, saturated "landmark" tower. Everything random comes
+from ``np.random.default_rng(seed)``, so a seed names a city.
+
+The :class:`City` is plain data (buildings as axis-aligned boxes) with queries
+(:meth:`City.is_free`, :meth:`City.random_free_pose`), the street graph agents
+plan over (:meth:`City.street_graph`), a closed driving loop
+(:meth:`City.route`) and :meth:`City.to_mjcf` for the MuJoCo world.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["Building", "City", "generate_city"]
+
+_LANDMARK_COLOURS = np.array(
+    [[0.9, 0.1, 0.1], [0.1, 0.3, 0.95], [0.95, 0.85, 0.1], [0.1, 0.8, 0.2], [0.8, 0.1, 0.8]]
+)
+# horizon walls: distinct colours per side so heading is visible from far away
+_HORIZON = {"E": (0.85, 0.55, 0.35), "N": (0.45, 0.6, 0.85), "W": (0.55, 0.8, 0.55), "S": (0.8, 0.75, 0.5)}
+
+
+@dataclass(frozen=True)
+class Building:
+    """An axis-aligned box building.
+
+    Attributes
+    ----------
+    center : (3,) float — box centre (x, y, z) in metres (z = half height).
+    half_size : (3,) float — half extents (hx, hy, hz).
+    rgb : (3,) float — wall colour in [0, 1].
+    window_rgb : (3,) float — colour of the window checker texture.
+    landmark : bool — whether this is a tall, saturated landmark tower.
+    """
+
+    center: tuple[float, float, float]
+    half_size: tuple[float, float, float]
+    rgb: tuple[float, float, float]
+    window_rgb: tuple[float, float, float]
+    landmark: bool = False
+
+    def contains(self, x: float, y: float, margin: float = 0.0) -> bool:
+        """Return whether (x, y) lies within the footprint grown by ``margin``."""
+        return (
+            abs(x - self.center[0]) < self.half_size[0] + margin
+            and abs(y - self.center[1]) < self.half_size[1] + margin
+        )
+
+
+@dataclass
+class City:
+    """A street-grid city (see the module docstring).
+
+    Attributes
+    ----------
+    size : float — side of the square city in metres.
+    street_width : float — street width in metres.
+    street_centers : (k,) float — coordinates of the street centrelines (same on x and y).
+    buildings : list of Building.
+    seed : int — the generating seed.
+    """
+
+    size: float
+    street_width: float
+    street_centers: NDArray[np.float64]
+    buildings: list[Building] = field(default_factory=list)
+    seed: int = 0
+
+    # ------------------------------------------------------------------ geometry
+    @property
+    def half(self) -> float:
+        """Half the city side: the city is ``[-half, half]^2``."""
+        return 0.5 * self.size
+
+    @property
+    def bounds(self) -> tuple[float, float]:
+        """(low, high) of both coordinates."""
+        return -self.half, self.half
+
+    def footprints(self) -> NDArray[np.float64]:
+        """Return building footprints as (n, 4) rows ``[xmin, ymin, xmax, ymax]``."""
+        if not self.buildings:
+            return np.zeros((0, 4))
+        c = np.array([b.center[:2] for b in self.buildings])
+        h = np.array([b.half_size[:2] for b in self.buildings])
+        return np.hstack([c - h, c + h])
+
+    def is_free(self, x: float, y: float, margin: float = 0.0) -> bool:
+        """Return whether a disc of radius ``margin`` at (x, y) is inside the city and off buildings."""
+        if not (np.isfinite(x) and np.isfinite(y)):
+            return False
+        if abs(x) > self.half - margin or abs(y) > self.half - margin:
+            return False
+        fp = self._fp
+        inside = (fp[:, 0] - margin < x) & (x < fp[:, 2] + margin)
+        inside &= (fp[:, 1] - margin < y) & (y < fp[:, 3] + margin)
+        return not bool(inside.any())
+
+    def free_mask(self, points: NDArray[np.float64], margin: float = 0.0) -> NDArray[np.bool_]:
+        """Vectorised :meth:`is_free` for (n, 2) points, returns (n,) bool."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        ok = np.all(np.isfinite(p), axis=1) & np.all(np.abs(p) <= self.half - margin, axis=1)
+        fp = self._fp
+        x, y = p[:, :1], p[:, 1:]
+        hit = (fp[:, 0] - margin < x) & (x < fp[:, 2] + margin) & (fp[:, 1] - margin < y) & (y < fp[:, 3] + margin)
+        return ok & ~hit.any(axis=1)
+
+    @property
+    def _fp(self) -> NDArray[np.float64]:
+        cached = getattr(self, "_fp_cache", None)
+        if cached is None or len(cached) != len(self.buildings):
+            cached = self.footprints()
+            object.__setattr__(self, "_fp_cache", cached)
+        return cached
+
+    def on_street(self, x: float, y: float, margin: float = 0.0) -> bool:
+        """Return whether (x, y) lies on a street with ``margin`` to its edges."""
+        half_w = 0.5 * self.street_width - margin
+        near = np.abs(self.street_centers - x).min() <= half_w or np.abs(self.street_centers - y).min() <= half_w
+        return bool(near) and abs(x) <= self.half - margin and abs(y) <= self.half - margin
+
+    def random_free_pose(self, rng: np.random.Generator, margin: float = 0.3) -> NDArray[np.float64]:
+        """Draw a uniform pose ``[x, y, yaw]`` on the streets (``margin`` from buildings), shape (3,)."""
+        for _ in range(10_000):
+            x, y = rng.uniform(-self.half + margin, self.half - margin, size=2)
+            if self.is_free(x, y, margin):
+                return np.array([x, y, rng.uniform(-np.pi, np.pi)])
+        raise RuntimeError("no free pose found; streets too narrow for the margin")
+
+    def random_street_point(self, rng: np.random.Generator) -> NDArray[np.float64]:
+        """Draw a point on a street centreline (a random edge of the street graph), shape (2,)."""
+        nodes, edges = self.street_graph()
+        i, j = edges[rng.integers(len(edges))]
+        t = rng.uniform()
+        return (1.0 - t) * nodes[i] + t * nodes[j]
+
+    # ------------------------------------------------------------------ graph
+    def street_graph(self) -> tuple[NDArray[np.float64], list[tuple[int, int]]]:
+        """Return the street graph: intersections and the street segments between them.
+
+        Returns
+        -------
+        nodes : (k*k, 2) float — intersection positions; node ``i * k + j`` is at
+            ``(street_centers[j], street_centers[i])`` (row i = y, column j = x).
+        edges : list of (a, b) int pairs, a < b — straight street segments joining
+            neighbouring intersections.
+        """
+        c = self.street_centers
+        k = len(c)
+        xx, yy = np.meshgrid(c, c)
+        nodes = np.stack([xx.ravel(), yy.ravel()], axis=1)
+        edges = []
+        for i in range(k):
+            for j in range(k):
+                a = i * k + j
+                if j + 1 < k:
+                    edges.append((a, a + 1))
+                if i + 1 < k:
+                    edges.append((a, a + k))
+        return nodes, edges
+
+    def route(self) -> NDArray[np.float64]:
+        """Return a closed driving loop through the streets, (p, 2) intersection waypoints.
+
+        The loop visits every intersection once (a Hamiltonian cycle of the grid
+        graph: up the first column, then snaking through the other columns) when
+        the number of streets is even, else it is the outer ring. The last
+        waypoint connects back to the first; consecutive waypoints are joined by
+        a street segment.
+        """
+        nodes, _ = self.street_graph()
+        k = len(self.street_centers)
+        if k % 2 == 0:
+            order = [(i, 0) for i in range(k - 1, -1, -1)]
+            for i in range(k):
+                cols = range(1, k) if i % 2 == 0 else range(k - 1, 0, -1)
+                order += [(i, j) for j in cols]
+        else:
+            ring = [(0, j) for j in range(k)] + [(i, k - 1) for i in range(1, k)]
+            ring += [(k - 1, j) for j in range(k - 2, -1, -1)] + [(i, 0) for i in range(k - 2, 0, -1)]
+            order = ring
+        return np.array([nodes[i * k + j] for i, j in order])
+
+    # ------------------------------------------------------------------ MJCF
+    def to_mjcf(self, robot_xml: str = "", robot_assets: str = "", actuators: str = "", timestep: float = 0.005) -> str:
+        """Return a MuJoCo MJCF document for the city (plus optional robot parts).
+
+        Parameters
+        ----------
+        robot_xml : str — body XML inserted into ``<worldbody>``.
+        robot_assets : str — XML inserted into ``<asset>``.
+        actuators : str — XML inserted into ``<actuator>``.
+        timestep : float — physics step (s); 5 ms keeps the wheel contacts smooth.
+        """
+        h = self.half
+        far = h + 12.0
+        extent = 2.0 * far  # znear/zfar are in units of the extent
+        assets = [
+            '<texture name="ground" type="2d" builtin="checker" width="64" height="64" '
+            'rgb1="0.32 0.32 0.34" rgb2="0.36 0.36 0.38"/>',
+            '<material name="ground" texture="ground" texrepeat="1 1" texuniform="true"/>',
+        ]
+        geoms = [
+            f'<geom name="floor" type="plane" size="{far + 2:.3f} {far + 2:.3f} {far + 2:.3f}" material="ground" '
+            'contype="1" conaffinity="1" group="0"/>'
+        ]
+        for s in self.street_centers:  # lane markings (visual only)
+            for x0, y0, hx, hy in ((s, 0.0, 0.04, h), (0.0, s, h, 0.04)):
+                geoms.append(
+                    f'<geom type="box" pos="{x0:.3f} {y0:.3f} 0.001" size="{hx:.3f} {hy:.3f} 0.001" '
+                    'rgba="0.9 0.9 0.8 1" contype="0" conaffinity="0" group="1"/>'
+                )
+        for i, b in enumerate(self.buildings):
+            r1, r2 = " ".join(f"{v:.3f}" for v in b.rgb), " ".join(f"{v:.3f}" for v in b.window_rgb)
+            assets.append(
+                f'<texture name="tex{i}" type="2d" builtin="checker" width="32" height="32" rgb1="{r1}" rgb2="{r2}"/>'
+            )
+            assets.append(f'<material name="mat{i}" texture="tex{i}" texrepeat="2 2.5" texuniform="true"/>')
+            pos = " ".join(f"{v:.3f}" for v in b.center)
+            size = " ".join(f"{v:.3f}" for v in b.half_size)
+            geoms.append(
+                f'<geom name="building{i}" type="box" pos="{pos}" size="{size}" material="mat{i}" '
+                'contype="2" conaffinity="2" group="2"/>'
+            )
+        for name, (x, y, hx, hy) in {  # invisible walls keep the robot in the city
+            "E": (h + 0.25, 0, 0.25, h + 0.5), "W": (-h - 0.25, 0, 0.25, h + 0.5),
+            "N": (0, h + 0.25, h + 0.5, 0.25), "S": (0, -h - 0.25, h + 0.5, 0.25),
+        }.items():
+            geoms.append(
+                f'<geom name="wall{name}" type="box" pos="{x} {y} 0.5" size="{hx} {hy} 0.5" '
+                'rgba="1 1 1 0" contype="2" conaffinity="2" group="3"/>'
+            )
+        for name, (x, y, hx, hy) in {
+            "E": (far, 0, 0.5, far), "W": (-far, 0, 0.5, far), "N": (0, far, far, 0.5), "S": (0, -far, far, 0.5)
+        }.items():
+            rgb = " ".join(str(v) for v in _HORIZON[name])
+            assets.append(
+                f'<texture name="sky{name}" type="2d" builtin="gradient" width="64" height="64" '
+                f'rgb1="0.95 0.97 1.0" rgb2="{rgb}"/>'
+            )
+            assets.append(f'<material name="sky{name}" texture="sky{name}" texrepeat="1 1"/>')
+            geoms.append(
+                f'<geom name="horizon{name}" type="box" pos="{x} {y} 20" size="{hx} {hy} 20" '
+                f'material="sky{name}" contype="0" conaffinity="0" group="2"/>'
+            )
+        return f"""<mujoco model="appearance_nav_city_{self.seed}">
+  <compiler angle="radian" autolimits="true"/>
+  <option timestep="{timestep}" integrator="implicitfast"/>
+  <statistic extent="{extent:.3f}" center="0 0 0"/>
+  <visual>
+    <quality offsamples="0" shadowsize="0"/>
+    <global offwidth="640" offheight="480"/>
+    <map znear="{0.02 / extent:.6f}" zfar="{3.0 * far / extent:.6f}"/>
+    <headlight ambient="0.45 0.45 0.45" diffuse="0.35 0.35 0.35" specular="0 0 0"/>
+  </visual>
+  <asset>
+    {chr(10).join('    ' + a for a in assets).strip()}
+    {robot_assets}
+  </asset>
+  <worldbody>
+    <light name="sun" directional="true" castshadow="false" pos="0 0 10" dir="0.3 0.4 -1" diffuse="0.5 0.5 0.5"/>
+    {chr(10).join('    ' + g for g in geoms).strip()}
+    {robot_xml}
+  </worldbody>
+  <actuator>
+    {actuators}
+  </actuator>
+</mujoco>
+"""
+
+
+def _street_centers(size: float, block_size: float, street_width: float) -> NDArray[np.float64]:
+    n_blocks = int(np.floor((size - street_width) / (block_size + street_width) + 1e-9))
+    if n_blocks < 1:
+        raise ValueError(
+            f"city_size={size} too small for one block of {block_size} m between streets of {street_width} m"
+        )
+    block = (size - street_width * (n_blocks + 1)) / n_blocks  # stretch blocks to fill the city
+    first = -0.5 * size + 0.5 * street_width
+    return first + np.arange(n_blocks + 1) * (block + street_width)
+
+
+def _block_buildings(
+    rng: np.random.Generator, lo: NDArray[np.float64], hi: NDArray[np.float64], max_height: float
+) -> list[Building]:
+    """Split the block [lo, hi] into 1-4 lots and put a building on each."""
+    nx, ny = rng.integers(1, 3, size=2)
+    xs = np.linspace(lo[0], hi[0], nx + 1)
+    ys = np.linspace(lo[1], hi[1], ny + 1)
+    if nx == 2:
+        xs[1] += rng.uniform(-0.2, 0.2) * (hi[0] - lo[0])
+    if ny == 2:
+        ys[1] += rng.uniform(-0.2, 0.2) * (hi[1] - lo[1])
+    out = []
+    for i in range(nx):
+        for j in range(ny):
+            if rng.uniform() < 0.12:  # an empty lot (a small square)
+                continue
+            a, b = np.array([xs[i], ys[j]]), np.array([xs[i + 1], ys[j + 1]])
+            inset = rng.uniform(0.05, 0.35, size=4)
+            a2, b2 = a + inset[:2], b - inset[2:]
+            if np.any(b2 - a2 < 0.4):
+                a2, b2 = a + 0.05, b - 0.05
+            height = rng.uniform(0.8, max_height)
+            hsv_rgb = _random_colour(rng)
+            win = np.clip(hsv_rgb * rng.uniform(0.2, 0.6) + rng.uniform(0.0, 0.15, 3), 0, 1)
+            c, hs = 0.5 * (a2 + b2), 0.5 * (b2 - a2)
+            out.append(Building((c[0], c[1], 0.5 * height), (hs[0], hs[1], 0.5 * height), tuple(hsv_rgb), tuple(win)))
+    return out
+
+
+def _random_colour(rng: np.random.Generator) -> NDArray[np.float64]:
+    h, s, v = rng.uniform(), rng.uniform(0.15, 0.7), rng.uniform(0.45, 0.95)
+    k = (np.array([5.0, 3.0, 1.0]) + h * 6.0) % 6.0
+    return v - v * s * np.clip(np.minimum(k, 4.0 - k), 0.0, 1.0)
+
+
+def generate_city(
+    seed: int,
+    city_size: float = 20.0,
+    block_size: float = 4.0,
+    street_width: float = 2.0,
+    max_height: float = 4.0,
+    n_landmarks: int = 3,
+) -> City:
+    """Generate the city named by ``seed``.
+
+    Parameters
+    ----------
+    seed : int — scene seed for ``np.random.default_rng``.
+    city_size : float — side of the square city (m).
+    block_size : float — nominal block side (m); blocks are stretched so the grid fills the city.
+    street_width : float — street width (m).
+    max_height : float — tallest ordinary building (m); landmarks are taller.
+    n_landmarks : int — number of tall, saturated towers (one per chosen block).
+    """
+    for name, v in (("city_size", city_size), ("block_size", block_size), ("street_width", street_width)):
+        if not (np.isfinite(v) and v > 0):
+            raise ValueError(f"{name} must be a positive finite number, got {v}")
+    rng = np.random.default_rng(seed)
+    centers = _street_centers(city_size, block_size, street_width)
+    half_w = 0.5 * street_width
+    blocks = [
+        (np.array([x0 + half_w, y0 + half_w]), np.array([x1 - half_w, y1 - half_w]))
+        for y0, y1 in zip(centers[:-1], centers[1:])
+        for x0, x1 in zip(centers[:-1], centers[1:])
+    ]
+    buildings: list[Building] = []
+    for lo, hi in blocks:
+        buildings += _block_buildings(rng, lo, hi, max_height)
+    order = rng.permutation(len(blocks))[: min(n_landmarks, len(blocks))]
+    for rank, bi in enumerate(order):
+        lo, hi = blocks[bi]
+        c = lo + rng.uniform(0.3, 0.7, size=2) * (hi - lo)
+        r = min(0.5, 0.2 * float(np.min(hi - lo)))
+        height = rng.uniform(1.6, 2.2) * max_height
+        buildings = [b for b in buildings if not _overlaps(b, c, r)]
+        rgb = _LANDMARK_COLOURS[rank % len(_LANDMARK_COLOURS)]
+        buildings.append(Building((c[0], c[1], 0.5 * height), (r, r, 0.5 * height), tuple(rgb), tuple(rgb * 0.4), True))
+    return City(size=float(city_size), street_width=float(street_width), street_centers=centers,
+                buildings=buildings, seed=int(seed))
+
+
+def _overlaps(b: Building, c: NDArray[np.float64], r: float) -> bool:
+    return abs(b.center[0] - c[0]) < b.half_size[0] + r + 0.1 and abs(b.center[1] - c[1]) < b.half_size[1] + r + 0.1
