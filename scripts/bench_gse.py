@@ -1,0 +1,376 @@
+"""Benchmark of GSERegressor: fit time / memory vs n, query latency, accuracy vs KNR and retrieval.
+
+CleanRL style: one file, every setting in ``Args`` (``--help`` lists them), results in files.
+
+    python scripts/bench_gse.py            # full run: n = 1000, 2500, 5000, 10000 (m = 64)
+    python scripts/bench_gse.py --quick    # smoke run: n <= 1000
+
+What is measured
+----------------
+* Scaling (one fresh subprocess per n, so numbers do not leak between sizes): data
+  ``regression_manifold(n, dim_theta=3, m)`` (x, y in [0,1]^2, periodic yaw), wall-clock
+  ``GSERegressor(periodic=(2,)).fit`` time, and peak memory of the fit as the growth of
+  the process's peak resident set size, ``ru_maxrss`` after fit minus before fit (Linux,
+  KiB -> MiB). It includes BLAS/LAPACK workspace and freed temporaries, unlike
+  tracemalloc (which only sees allocations made through Python / numpy and slows the
+  fit); ``--tracemalloc`` adds a second, traced fit and reports its numpy-level peak too.
+* Latency at each n: ``predict`` (w -> theta) and ``predict_features`` (theta -> w) for
+  one point (median of ``latency_repeats`` calls after a warm-up) and for a batch of
+  ``batch_size`` held-out points (median of 3).
+* Growth exponent: least-squares slope of log(fit time) vs log(n).
+* Accuracy (in this process): train ``accuracy_n_train`` / test ``accuracy_n_test`` samples
+  (70/30 of 2500 as in the seed paper) of ``regression_manifold`` with dim_theta = 2 and 3
+  (same map, different sample seeds). psi* (w -> theta): position RRMSE over columns
+  (x, y) (``localization.metrics.rrmse``) and heading RMSE (wrapped, rad). Phi*
+  (theta -> w): RRMSE over all m feature columns against the true Phi. Baselines: KNR
+  (``KernelRegressor``, one LOO bandwidth) and retrieval (``RetrievalRegressor``, k = 1 and
+  k by 5-fold CV); for Phi their input is the pose with the yaw lifted to (cos, sin).
+Targets (PASS/MISS): fit(n=2500) <= 20 s, fit(n=10000) <= 60 s, growth exponent <= 2
+(well below cubic), one ``predict`` / ``predict_features`` query <= 1 ms at n = latency_n.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+
+@dataclass
+class Args:
+    ns: str = field(default="1000,2500,5000,10000",
+                    metadata={"help": "comma-separated training sizes n for the scaling runs"})
+    m: int = field(default=64, metadata={"help": "feature dimension m of the synthetic manifold"})
+    seed: int = field(default=0, metadata={"help": "sample seed (test sets use seed+1)"})
+    map_seed: int = field(default=1234, metadata={"help": "seed of the synthetic feature map Phi"})
+    n_neighbors: int = field(default=20, metadata={"help": "GSERegressor n_neighbors"})
+    batch_size: int = field(default=1000, metadata={"help": "batch size of the latency runs"})
+    latency_repeats: int = field(default=100, metadata={"help": "single-query calls timed"})
+    latency_n: int = field(default=2500, metadata={"help": "n at which the 1 ms query target "
+                                                   "is judged (largest n run if absent)"})
+    accuracy_n_train: int = field(default=1750, metadata={"help": "training size, accuracy runs"})
+    accuracy_n_test: int = field(default=750, metadata={"help": "test size, accuracy runs"})
+    accuracy_dims: str = field(default="2,3", metadata={"help": "dim_theta values compared"})
+    skip_accuracy: bool = field(default=False, metadata={"help": "only run the scaling part"})
+    skip_scaling: bool = field(default=False, metadata={"help": "only run the accuracy part"})
+    tracemalloc: bool = field(default=False, metadata={"help": "also report the tracemalloc "
+                                                       "peak of a second, traced fit"})
+    threads: int = field(default=0, metadata={"help": "BLAS/OpenMP threads in the workers "
+                                              "(0 = inherit the environment)"})
+    timeout: float = field(default=900.0, metadata={"help": "seconds allowed per scaling worker"})
+    quick: bool = field(default=False, metadata={"help": "smoke run: n = 250,500,1000, "
+                                                 "smaller accuracy sets, fewer repeats"})
+    out: str = field(default="", metadata={"help": "output prefix (default results/bench_gse, "
+                                           "results/bench_gse_quick with --quick)"})
+    worker_n: int = field(default=0, metadata={"help": "internal: run one scaling worker"})
+    worker_out: str = field(default="", metadata={"help": "internal: worker JSON output path"})
+
+
+def parse_args(argv: list[str] | None = None) -> Args:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    for f in dataclasses.fields(Args):
+        flag = "--" + f.name.replace("_", "-")
+        if f.type in (bool, "bool"):
+            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=f.default,
+                                help=f.metadata["help"])
+        else:
+            typ = {"int": int, "float": float, "str": str}.get(str(f.type), f.type)
+            parser.add_argument(flag, type=typ, default=f.default, help=f.metadata["help"])
+    args = Args(**vars(parser.parse_args(argv)))
+    if args.quick:
+        if args.ns == Args.ns:
+            args.ns = "250,500,1000"
+        if args.accuracy_n_train == Args.accuracy_n_train:
+            args.accuracy_n_train, args.accuracy_n_test = 700, 300
+        if args.latency_repeats == Args.latency_repeats:
+            args.latency_repeats = 20
+        if args.latency_n == Args.latency_n:
+            args.latency_n = 1000
+    if not args.out:
+        args.out = "results/bench_gse_quick" if args.quick else "results/bench_gse"
+    return args
+
+
+# ---------------------------------------------------------------- scaling worker
+def _median_time(fn, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+def run_worker(args: Args) -> dict[str, Any]:
+    """Fit GSE at n = args.worker_n in this (fresh) process and time its queries."""
+    from localization.regression import GSERegressor
+    from localization.synthetic import regression_manifold
+
+    n = args.worker_n
+    W, T, _ = regression_manifold(n, dim_theta=3, m=args.m, seed=args.seed, map_seed=args.map_seed)
+    Wt, Tt, _ = regression_manifold(args.batch_size, dim_theta=3, m=args.m, seed=args.seed + 1,
+                                    map_seed=args.map_seed)
+    model = GSERegressor(periodic=(2,), n_neighbors=args.n_neighbors,
+                         random_state=args.seed)
+    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        t0 = time.perf_counter()
+        model.fit(W, T)
+        fit_s = time.perf_counter() - t0
+    rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    res: dict[str, Any] = {
+        "n": n, "fit_s": fit_s, "peak_rss_delta_mib": (rss1 - rss0) / 1024.0,
+        "peak_rss_mib": rss1 / 1024.0, "fit_warnings": sorted({str(w.message)[:120]
+                                                               for w in caught}),
+    }
+    if args.tracemalloc:
+        import tracemalloc
+
+        tracemalloc.start()
+        GSERegressor(periodic=(2,), n_neighbors=args.n_neighbors,
+                     random_state=args.seed).fit(W, T)
+        res["tracemalloc_peak_mib"] = tracemalloc.get_traced_memory()[1] / 2**20
+        tracemalloc.stop()
+    w1, t1 = Wt[:1], Tt[:1]
+    model.predict(w1), model.predict_features(t1)  # warm-up
+    r = args.latency_repeats
+    res["predict_1_ms"] = 1e3 * _median_time(lambda: model.predict(w1), r)
+    res["predict_features_1_ms"] = 1e3 * _median_time(lambda: model.predict_features(t1), r)
+    res["predict_batch_ms"] = 1e3 * _median_time(lambda: model.predict(Wt), 3)
+    res["predict_features_batch_ms"] = 1e3 * _median_time(lambda: model.predict_features(Tt), 3)
+    res["batch_size"] = len(Wt)
+    return res
+
+
+def run_scaling(args: Args) -> list[dict[str, Any]]:
+    env = dict(os.environ)
+    if args.threads > 0:
+        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            env[var] = str(args.threads)
+    rows = []
+    for n in [int(s) for s in args.ns.split(",") if s.strip()]:
+        with tempfile.TemporaryDirectory() as tmp:
+            out = Path(tmp) / "worker.json"
+            cmd = [sys.executable, str(Path(__file__).resolve()), "--worker-n", str(n),
+                   "--worker-out", str(out), "--m", str(args.m), "--seed", str(args.seed),
+                   "--map-seed", str(args.map_seed), "--n-neighbors", str(args.n_neighbors),
+                   "--batch-size", str(args.batch_size),
+                   "--latency-repeats", str(args.latency_repeats)]
+            if args.tracemalloc:
+                cmd.append("--tracemalloc")
+            print(f"[scaling] n = {n} ...", flush=True)
+            try:
+                proc = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True,
+                                      timeout=args.timeout)
+                if proc.returncode != 0 or not out.exists():
+                    err = (proc.stderr or "").strip().splitlines()[-3:]
+                    rows.append({"n": n, "error": " | ".join(err) or f"exit {proc.returncode}"})
+                else:
+                    rows.append(json.loads(out.read_text()))
+            except subprocess.TimeoutExpired:
+                rows.append({"n": n, "error": f"timeout after {args.timeout:.0f} s"})
+        print(f"          {_fmt_row(rows[-1])}", flush=True)
+    return rows
+
+
+def _fmt_row(r: dict[str, Any]) -> str:
+    if "error" in r:
+        return f"ERROR: {r['error']}"
+    return (f"fit {r['fit_s']:.2f} s, +{r['peak_rss_delta_mib']:.0f} MiB, predict(1) "
+            f"{r['predict_1_ms']:.3f} ms, predict_features(1) {r['predict_features_1_ms']:.3f} ms")
+
+
+def growth_exponent(rows: list[dict[str, Any]]) -> float | None:
+    ok = [r for r in rows if "fit_s" in r]
+    if len(ok) < 2:
+        return None
+    n = np.log([r["n"] for r in ok])
+    t = np.log([r["fit_s"] for r in ok])
+    return float(np.polyfit(n, t, 1)[0])
+
+
+# ---------------------------------------------------------------- accuracy
+def _lift_pose(T: np.ndarray) -> np.ndarray:
+    """Pose -> input features for the baselines' Phi: yaw as (cos, sin)."""
+    if T.shape[1] == 3:
+        return np.column_stack([T[:, :2], np.cos(T[:, 2]), np.sin(T[:, 2])])
+    return T
+
+
+def run_accuracy(args: Args) -> list[dict[str, Any]]:
+    from localization.baselines import KernelRegressor, RetrievalRegressor
+    from localization.metrics import angular_rmse, rrmse
+    from localization.regression import GSERegressor
+    from localization.synthetic import regression_manifold
+
+    rows = []
+    for dim in [int(s) for s in args.accuracy_dims.split(",") if s.strip()]:
+        W, T, phi = regression_manifold(args.accuracy_n_train, dim_theta=dim, m=args.m,
+                                        seed=args.seed, map_seed=args.map_seed)
+        Wt, Tt, _ = regression_manifold(args.accuracy_n_test, dim_theta=dim, m=args.m,
+                                        seed=args.seed + 1, map_seed=args.map_seed)
+        per = (2,) if dim == 3 else ()
+        Wtrue = phi(Tt)
+        models: dict[str, tuple[Any, Any]] = {
+            "GSE": (GSERegressor(periodic=per, n_neighbors=args.n_neighbors,
+                                 random_state=args.seed), None),
+            "KNR": (KernelRegressor(periodic=per), KernelRegressor()),
+            "retrieval k=1": (RetrievalRegressor(n_neighbors=1, periodic=per),
+                              RetrievalRegressor(n_neighbors=1)),
+            "retrieval k=cv": (RetrievalRegressor(n_neighbors="cv", periodic=per),
+                               RetrievalRegressor(n_neighbors="cv")),
+        }
+        for name, (loc, fm) in models.items():
+            row: dict[str, Any] = {"dim_theta": dim, "method": name, "n_train": len(W),
+                                   "n_test": len(Wt)}
+            print(f"[accuracy] dim_theta={dim} {name} ...", flush=True)
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    t0 = time.perf_counter()
+                    loc.fit(W, T)
+                    row["fit_s"] = time.perf_counter() - t0
+                    pred = loc.predict(Wt)
+                    if fm is None:  # GSE: one model gives both directions
+                        wpred = loc.predict_features(Tt)
+                    else:
+                        wpred = fm.fit(_lift_pose(T), W).predict(_lift_pose(Tt))
+                row["psi_position_rrmse"] = rrmse(pred, Tt, columns=(0, 1))
+                row["heading_rmse_rad"] = angular_rmse(pred[:, 2], Tt[:, 2]) if dim == 3 else None
+                row["phi_rrmse"] = rrmse(wpred, Wtrue)
+                if hasattr(loc, "bandwidth_"):
+                    row["knr_bandwidth"] = loc.bandwidth_
+                if getattr(loc, "n_neighbors_", None) is not None and name.startswith("retr"):
+                    row["k"] = loc.n_neighbors_
+            except Exception as exc:  # report, keep benchmarking the others
+                row["error"] = f"{type(exc).__name__}: {exc}"[:200]
+            rows.append(row)
+    return rows
+
+
+# ---------------------------------------------------------------- report
+def _f(x: Any, fmt: str = "{:.3f}") -> str:
+    return "-" if x is None else fmt.format(x)
+
+
+def targets(args: Args, scaling: list[dict[str, Any]], expo: float | None) -> list[dict]:
+    by_n = {r["n"]: r for r in scaling if "fit_s" in r}
+    out = []
+
+    def add(name: str, value: float | None, limit: float, unit: str) -> None:
+        status = "NOT RUN" if value is None else ("PASS" if value <= limit else "MISS")
+        out.append({"target": name, "value": value, "limit": limit, "unit": unit,
+                    "status": status})
+
+    add("fit time n=2500", by_n.get(2500, {}).get("fit_s"), 20.0, "s")
+    add("fit time n=10000", by_n.get(10000, {}).get("fit_s"), 60.0, "s")
+    add("growth exponent of fit time", expo, 2.0, "")
+    n_lat = args.latency_n if args.latency_n in by_n else (max(by_n) if by_n else None)
+    lat = by_n.get(n_lat, {})
+    add(f"predict, one query (n={n_lat})", lat.get("predict_1_ms"), 1.0, "ms")
+    add(f"predict_features, one query (n={n_lat})", lat.get("predict_features_1_ms"), 1.0, "ms")
+    return out
+
+
+def markdown(args: Args, res: dict[str, Any]) -> str:
+    lines = [f"# GSE benchmark ({'quick' if args.quick else 'full'} run, {res['meta']['date']})",
+             "", f"Synthetic regression manifold, m = {args.m}, GSE n_neighbors = "
+             f"{args.n_neighbors}; {res['meta']['cpu_count']} CPUs, threads = "
+             f"{args.threads or 'inherited'}; memory = peak RSS growth during fit (ru_maxrss).", ""]
+    if res["scaling"]:
+        lines += ["## Fit time, memory and latency vs n (dim_theta = 3)", "",
+                  "| n | fit (s) | peak RSS +MiB | predict 1 (ms) | predict_features 1 (ms) | "
+                  f"predict {args.batch_size} (ms) | predict_features {args.batch_size} (ms) |",
+                  "|---|---|---|---|---|---|---|"]
+        for r in res["scaling"]:
+            if "error" in r:
+                lines.append(f"| {r['n']} | error: {r['error']} | | | | | |")
+                continue
+            lines.append(f"| {r['n']} | {r['fit_s']:.2f} | {r['peak_rss_delta_mib']:.0f} | "
+                         f"{r['predict_1_ms']:.3f} | {r['predict_features_1_ms']:.3f} | "
+                         f"{r['predict_batch_ms']:.1f} | {r['predict_features_batch_ms']:.1f} |")
+        lines += ["", f"Growth exponent of fit time vs n: {_f(res['growth_exponent'], '{:.2f}')}",
+                  ""]
+    if res["accuracy"]:
+        lines += ["## Accuracy (RRMSE; lower is better)", "",
+                  "| dim_theta | method | psi* position RRMSE | heading RMSE (rad) | Phi* RRMSE | "
+                  "fit (s) | note |", "|---|---|---|---|---|---|---|"]
+        for r in res["accuracy"]:
+            note = r.get("error", "")
+            if "k" in r:
+                note = f"k = {r['k']}"
+            elif "knr_bandwidth" in r:
+                note = f"h = {r['knr_bandwidth']:.3g}"
+            lines.append(f"| {r['dim_theta']} | {r['method']} | "
+                         f"{_f(r.get('psi_position_rrmse'), '{:.4f}')} | "
+                         f"{_f(r.get('heading_rmse_rad'), '{:.4f}')} | "
+                         f"{_f(r.get('phi_rrmse'), '{:.4f}')} | {_f(r.get('fit_s'), '{:.2f}')} | "
+                         f"{note} |")
+        lines.append("")
+    if res["targets"]:
+        lines += ["## Targets", "", "| target | value | limit | status |", "|---|---|---|---|"]
+        for t in res["targets"]:
+            lines.append(f"| {t['target']} | {_f(t['value'], '{:.3f}')} {t['unit']} | "
+                         f"<= {t['limit']:g} {t['unit']} | {t['status']} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    if args.worker_n:
+        Path(args.worker_out).write_text(json.dumps(run_worker(args)))
+        return 0
+    import numpy
+    import scipy
+    import sklearn
+
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
+                            capture_output=True, text=True).stdout.strip()
+    res: dict[str, Any] = {"args": dataclasses.asdict(args), "meta": {
+        "date": time.strftime("%Y-%m-%d %H:%M:%S"), "git": commit,
+        "python": platform.python_version(), "numpy": numpy.__version__,
+        "scipy": scipy.__version__, "sklearn": sklearn.__version__,
+        "cpu_count": os.cpu_count(), "memory_measure": "ru_maxrss growth during fit, "
+        "fresh subprocess per n"}}
+    t0 = time.perf_counter()
+    res["scaling"] = [] if args.skip_scaling else run_scaling(args)
+    res["growth_exponent"] = growth_exponent(res["scaling"])
+    res["accuracy"] = [] if args.skip_accuracy else run_accuracy(args)
+    res["targets"] = targets(args, res["scaling"], res["growth_exponent"]) \
+        if res["scaling"] else []
+    res["meta"]["total_s"] = time.perf_counter() - t0
+    out = ROOT / args.out if not Path(args.out).is_absolute() else Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.with_suffix(".json").write_text(json.dumps(res, indent=2, default=float))
+    md = markdown(args, res)
+    out.with_suffix(".md").write_text(md + "\n")
+    print("\n" + md)
+    for t in res["targets"]:
+        print(f"{t['status']:8s} {t['target']}: {_f(t['value'], '{:.3f}')} {t['unit']} "
+              f"(limit {t['limit']:g} {t['unit']})")
+    print(f"\nwrote {out.with_suffix('.json')} and {out.with_suffix('.md')}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
