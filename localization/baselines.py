@@ -32,7 +32,6 @@ from sklearn.utils.validation import check_is_fitted
 
 from localization.metrics import wrap_angle
 
-
 Array = NDArray[np.float64]
 
 __all__ = ["KernelRegressor", "RetrievalRegressor"]
@@ -133,7 +132,7 @@ class _PoseRegressorBase(BaseEstimator, RegressorMixin):
                  settings=np.array(json.dumps(settings)))
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "_PoseRegressorBase":
+    def load(cls, path: str | os.PathLike) -> _PoseRegressorBase:
         """Rebuild a fitted model written by :meth:`save`."""
         with np.load(path, allow_pickle=False) as f:
             settings = json.loads(str(f["settings"]))
@@ -208,7 +207,7 @@ class KernelRegressor(_PoseRegressorBase):
         self.standardize = standardize
 
     # -- fitting -------------------------------------------------------------------
-    def fit(self, X: ArrayLike, Y: ArrayLike) -> "KernelRegressor":
+    def fit(self, X: ArrayLike, Y: ArrayLike) -> KernelRegressor:
         """Store the sample and choose the bandwidth.
 
         Parameters
@@ -411,7 +410,7 @@ class RetrievalRegressor(_PoseRegressorBase):
         self.random_state = random_state
         self.algorithm = algorithm
 
-    def fit(self, X: ArrayLike, Y: ArrayLike) -> "RetrievalRegressor":
+    def fit(self, X: ArrayLike, Y: ArrayLike) -> RetrievalRegressor:
         """Index the training features.
 
         Parameters

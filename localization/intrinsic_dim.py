@@ -55,7 +55,7 @@ class DimensionEstimate:
 
     @property
     def rounded(self) -> int:
-        return max(1, int(round(self.value)))
+        return max(1, round(self.value))
 
     def __float__(self) -> float:
         return float(self.value)
@@ -185,7 +185,7 @@ def local_dimension(X: ArrayLike, k1: int = 10, k2: int = 20, max_samples: int |
 
         value = float(skdim.id.CorrInt(k1=k1, k2=k2).fit(X).dimension_)
         method = "skdim.id.CorrInt"
-    except Exception as exc:  # pragma: no cover - only if scikit-dimension breaks
+    except Exception as exc:  # noqa: BLE001  # pragma: no cover - any skdim failure
         info["fallback"] = f"skdim.id.CorrInt failed ({exc!r}); numpy Grassberger-Procaccia used"
         value, method = _corr_dim_numpy(X, k1, k2), "correlation_dimension_numpy"
     return DimensionEstimate(value, method, info)
@@ -227,7 +227,7 @@ def pointwise_dimension(X: ArrayLike, n_neighbors: int = 20, aggregate: str = "m
 
         pw = np.asarray(skdim.id.MLE().fit(X, n_neighbors=n_neighbors).dimension_pw_, float)
         method = "skdim.id.MLE"
-    except Exception as exc:  # pragma: no cover - only if scikit-dimension breaks
+    except Exception as exc:  # noqa: BLE001  # pragma: no cover - any skdim failure
         info["fallback"] = f"skdim.id.MLE failed ({exc!r}); numpy Levina-Bickel used"
         pw, method = _mle_numpy(X, n_neighbors), "levina_bickel_numpy"
     pw = pw[np.isfinite(pw)]

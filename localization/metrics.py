@@ -20,7 +20,6 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-
 Array = NDArray[np.float64]
 
 __all__ = ["angular_error", "angular_rmse", "rmse", "rrmse", "wrap_angle"]

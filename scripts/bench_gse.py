@@ -179,7 +179,7 @@ def run_scaling(args: Args) -> list[dict[str, Any]]:
                 cmd.append("--tracemalloc")
             print(f"[scaling] n = {n} ...", flush=True)
             try:
-                proc = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True,
+                proc = subprocess.run(cmd, check=False, env=env, cwd=ROOT, capture_output=True, text=True,
                                       timeout=args.timeout)
                 if proc.returncode != 0 or not out.exists():
                     err = (proc.stderr or "").strip().splitlines()[-3:]
@@ -261,7 +261,7 @@ def run_accuracy(args: Args) -> list[dict[str, Any]]:
                     row["knr_bandwidth"] = loc.bandwidth_
                 if getattr(loc, "n_neighbors_", None) is not None and name.startswith("retr"):
                     row["k"] = loc.n_neighbors_
-            except Exception as exc:  # report, keep benchmarking the others
+            except Exception as exc:  # noqa: BLE001  (report, keep benchmarking the others)
                 row["error"] = f"{type(exc).__name__}: {exc}"[:200]
             rows.append(row)
     return rows
@@ -293,13 +293,13 @@ def targets(args: Args, scaling: list[dict[str, Any]], expo: float | None) -> li
 
 def markdown(args: Args, res: dict[str, Any]) -> str:
     lines = [f"# GSE benchmark ({'quick' if args.quick else 'full'} run, {res['meta']['date']})",
-             "", f"Synthetic regression manifold, m = {args.m}, GSE n_neighbors = "
+             "", (f"Synthetic regression manifold, m = {args.m}, GSE n_neighbors = "
              f"{args.n_neighbors}; {res['meta']['cpu_count']} CPUs, threads = "
-             f"{args.threads or 'inherited'}; memory = peak RSS growth during fit (ru_maxrss).", ""]
+             f"{args.threads or 'inherited'}; memory = peak RSS growth during fit (ru_maxrss)."), ""]
     if res["scaling"]:
         lines += ["## Fit time, memory and latency vs n (dim_theta = 3)", "",
-                  "| n | fit (s) | peak RSS +MiB | predict 1 (ms) | predict_features 1 (ms) | "
-                  f"predict {args.batch_size} (ms) | predict_features {args.batch_size} (ms) |",
+                  ("| n | fit (s) | peak RSS +MiB | predict 1 (ms) | predict_features 1 (ms) | "
+                  f"predict {args.batch_size} (ms) | predict_features {args.batch_size} (ms) |"),
                   "|---|---|---|---|---|---|---|"]
         for r in res["scaling"]:
             if "error" in r:
@@ -312,8 +312,8 @@ def markdown(args: Args, res: dict[str, Any]) -> str:
                   ""]
     if res["accuracy"]:
         lines += ["## Accuracy (RRMSE; lower is better)", "",
-                  "| dim_theta | method | psi* position RRMSE | heading RMSE (rad) | Phi* RRMSE | "
-                  "fit (s) | note |", "|---|---|---|---|---|---|---|"]
+                  ("| dim_theta | method | psi* position RRMSE | heading RMSE (rad) | Phi* RRMSE | "
+                  "fit (s) | note |"), "|---|---|---|---|---|---|---|"]
         for r in res["accuracy"]:
             note = r.get("error", "")
             if "k" in r:
@@ -344,7 +344,7 @@ def main(argv: list[str] | None = None) -> int:
     import scipy
     import sklearn
 
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], check=False, cwd=ROOT,
                             capture_output=True, text=True).stdout.strip()
     res: dict[str, Any] = {"args": dataclasses.asdict(args), "meta": {
         "date": time.strftime("%Y-%m-%d %H:%M:%S"), "git": commit,
