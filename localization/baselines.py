@@ -283,7 +283,7 @@ class KernelRegressor(_PoseRegressorBase):
             yield np.arange(n), dist**2, idx
 
     def _choose_bandwidth(self) -> None:
-        blocks = list(self._loo_blocks()) if self.n_neighbors_ is None else None
+        blocks = list(self._loo_blocks())  # dense: n^2 <= DENSE_LIMIT^2; kNN: n x k
         if self.bandwidth_grid is not None:
             grid = np.asarray(self.bandwidth_grid, dtype=np.float64).ravel()
             if grid.size == 0 or not np.all(np.isfinite(grid)) or np.any(grid <= 0):
@@ -292,7 +292,7 @@ class KernelRegressor(_PoseRegressorBase):
         else:
             grid = self._default_grid(blocks)
         errs = np.zeros(grid.size)
-        for rows, D2, idx in (blocks if blocks is not None else self._loo_blocks()):
+        for rows, D2, idx in blocks:
             for g, h in enumerate(grid):
                 pred = self._nw(D2, idx, h)
                 errs[g] += np.sum((pred - self._E[rows]) ** 2)
@@ -304,13 +304,13 @@ class KernelRegressor(_PoseRegressorBase):
         self.bandwidth_grid_, self.loo_errors_, self.bandwidth_ = grid, errs, float(grid[best])
 
     def _default_grid(self, blocks) -> Array:
-        if blocks is not None:  # dense
+        if self.n_neighbors_ is None:  # dense
             nn = np.concatenate([np.sqrt(D2.min(axis=1)) for _, D2, _ in blocks])
             rng = np.random.default_rng(0)
             sub = self._Xs[rng.choice(len(self._Xs), min(1000, len(self._Xs)), replace=False)]
             hi = float(np.median(euclidean_distances(sub, sub)[np.triu_indices(len(sub), 1)]))
         else:
-            dist, _ = self._nn.kneighbors()
+            dist = np.sqrt(blocks[0][1])
             nn, hi = dist[:, 0], 2.0 * float(np.median(dist[:, -1]))
         lo = 0.25 * float(np.median(nn))
         if not lo > 0:
