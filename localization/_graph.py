@@ -1,0 +1,174 @@
+"""Private numerical helpers shared by GSE and the GSE regressor.
+
+Neighbourhood graphs, batched local PCA, polar factors, brute-force neighbour
+queries and input validation. Everything is vectorised over samples; nothing
+here forms an n x n or nq x nq dense matrix.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import sparse
+from scipy.sparse.csgraph import connected_components
+from sklearn.neighbors import NearestNeighbors
+
+Array = NDArray[np.float64]
+
+_CHUNK = 1024  # rows per batch in chunked computations (bounds memory)
+
+
+def check_2d(X: object, name: str, n_cols: int | None = None) -> Array:
+    """Validate a finite float64 2-D array (n, n_cols); clear ValueError otherwise."""
+    X = np.asarray(X)
+    if X.dtype.kind not in "biuf":
+        raise ValueError(f"{name} must be numeric, got dtype {X.dtype}")
+    if X.ndim != 2:
+        raise ValueError(f"{name} must be 2-D of shape (n_samples, n_features), got shape {X.shape}"
+                         " (reshape 1-D input with X.reshape(1, -1) for one sample)")
+    if X.shape[0] == 0:
+        raise ValueError(f"{name} has no rows")
+    if n_cols is not None and X.shape[1] != n_cols:
+        raise ValueError(f"{name} has {X.shape[1]} columns, expected {n_cols} (as in fit)")
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    bad = ~np.isfinite(X).all(axis=1)
+    if bad.any():
+        raise ValueError(f"{name} contains NaN or inf in {bad.sum()} row(s), first row "
+                         f"{int(np.flatnonzero(bad)[0])}")
+    return X
+
+
+def polar(M: Array) -> Array:
+    """Orthogonal polar factor U V^T of each matrix in a batch (..., a, b), a >= b."""
+    U, _, Vt = np.linalg.svd(M, full_matrices=False)
+    return U @ Vt
+
+
+def knn_graph(Z: Array, n_neighbors: int) -> tuple[Array, NDArray[np.intp]]:
+    """k nearest neighbours of every sample, excluding itself.
+
+    Returns
+    -------
+    dist : ndarray of shape (n, k)
+    ind : ndarray of shape (n, k)
+
+    Raises ValueError naming duplicate points (zero distance to another sample).
+    """
+    n = Z.shape[0]
+    if n_neighbors < 1 or n_neighbors >= n:
+        raise ValueError(f"n_neighbors={n_neighbors} must be in [1, n_samples - 1] = [1, {n - 1}]"
+                         f"; got {n} samples: use more samples or fewer neighbours")
+    nn = NearestNeighbors(n_neighbors=n_neighbors + 1).fit(Z)
+    dist, ind = nn.kneighbors(Z)
+    scale = max(float(np.median(dist[:, -1])), np.finfo(float).tiny)
+    dup = dist[:, 1] <= 1e-12 * scale
+    if dup.any():
+        i = np.flatnonzero(dup)
+        pairs = [(int(a), int(ind[a, 0] if ind[a, 0] != a else ind[a, 1])) for a in i[:5]]
+        raise ValueError(f"{dup.sum()} sample(s) duplicate another sample, e.g. index pairs {pairs}:"
+                         " remove duplicate points before fitting")
+    # drop self (normally column 0; robust to ties)
+    keep = ind != np.arange(n)[:, None]
+    keep[keep.sum(axis=1) > n_neighbors, -1] = False
+    return dist[keep].reshape(n, n_neighbors), ind[keep].reshape(n, n_neighbors)
+
+
+def symmetric_edges(ind: NDArray[np.intp], allowed: NDArray[np.bool_] | None = None
+                    ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Unique undirected edges (i < j) of the symmetrised kNN graph (A <- max(A, A^T))."""
+    n, k = ind.shape
+    i = np.repeat(np.arange(n), k)
+    j = ind.ravel()
+    if allowed is not None:
+        i, j = i[allowed.ravel()], j[allowed.ravel()]
+    a, b = np.minimum(i, j), np.maximum(i, j)
+    key = np.unique(a.astype(np.int64) * n + b)
+    return (key // n).astype(np.intp), (key % n).astype(np.intp)
+
+
+def check_connected(n: int, ei: NDArray[np.intp], ej: NDArray[np.intp], what: str) -> int:
+    """Number of connected components; ValueError if more than one."""
+    A = sparse.coo_matrix((np.ones(len(ei)), (ei, ej)), shape=(n, n)).tocsr()
+    n_comp, labels = connected_components(A, directed=False)
+    if n_comp > 1:
+        sizes = np.bincount(labels)
+        raise ValueError(
+            f"the neighbourhood graph of {what} has {n_comp} connected components (sizes "
+            f"{sorted(sizes.tolist(), reverse=True)[:10]}): GSE would place them arbitrarily. "
+            "Increase n_neighbors (or bandwidth), or fit one model per component.")
+    return int(n_comp)
+
+
+def local_pca(Z: Array, centers: Array, nbr: Array, weights: Array, q: int) -> Array:
+    """Weighted local PCA tangent bases, never forming p x p matrices.
+
+    Parameters
+    ----------
+    Z : ndarray of shape (n, p)
+        Sample.
+    centers : ndarray of shape (n_c, p)
+        Points at which to estimate the tangent space.
+    nbr : ndarray of shape (n_c, k)
+        Neighbour indices into ``Z``.
+    weights : ndarray of shape (n_c, k)
+        Kernel weights (non-negative).
+    q : int
+
+    Returns
+    -------
+    Q : ndarray of shape (n_c, p, q)
+        Orthonormal bases: top-q right singular vectors of the k x p matrix with
+        rows ``sqrt(w_j) (Z_j - center)``.
+    """
+    n_c, p = centers.shape
+    Q = np.empty((n_c, p, q))
+    for s in range(0, n_c, _CHUNK):
+        sl = slice(s, s + _CHUNK)
+        D = (Z[nbr[sl]] - centers[sl, None, :]) * np.sqrt(weights[sl])[:, :, None]
+        _, _, Vt = np.linalg.svd(D, full_matrices=False)
+        Q[sl] = np.swapaxes(Vt[:, :q, :], 1, 2)
+    return Q
+
+
+def brute_knn(X: Array, sqnorm: Array, Xq: Array, k: int) -> tuple[Array, NDArray[np.intp]]:
+    """k nearest rows of ``X`` for each row of ``Xq``, sorted by distance.
+
+    Candidates come from a GEMM; the returned squared distances are recomputed
+    exactly from differences, so results are sample-wise (a row gives the same
+    answer alone or in a batch, barring exact ties).
+    """
+    n = X.shape[0]
+    k = min(k, n)
+    D2 = np.empty((Xq.shape[0], k))
+    ind = np.empty((Xq.shape[0], k), dtype=np.intp)
+    for s in range(0, Xq.shape[0], _CHUNK):
+        xq = Xq[s:s + _CHUNK]
+        d2 = sqnorm[None, :] - 2.0 * xq @ X.T
+        if k < n:
+            cand = np.argpartition(d2, k - 1, axis=1)[:, :k]
+        else:
+            cand = np.broadcast_to(np.arange(n), d2.shape).copy()
+        exact = ((X[cand] - xq[:, None, :]) ** 2).sum(axis=2)
+        order = np.argsort(exact, axis=1, kind="stable")
+        ind[s:s + _CHUNK] = np.take_along_axis(cand, order, axis=1)
+        D2[s:s + _CHUNK] = np.take_along_axis(exact, order, axis=1)
+    return D2, ind
+
+
+def same_side(cut_nb: Array) -> NDArray[np.bool_]:
+    """Mask of neighbours on the same side of a cut at +-pi as the nearest one.
+
+    ``cut_nb`` (n, k): the periodic coordinate (radians, in (-pi, pi]) of each
+    neighbour, nearest first. A neighbour is kept when the unwrapped difference
+    to the nearest neighbour is at most pi (the segment between them does not
+    cross the cut).
+    """
+    return np.abs(cut_nb - cut_nb[:, :1]) <= np.pi
+
+
+def softmax_weights(logw: Array) -> tuple[Array, Array]:
+    """Normalised weights from log-weights (n, k) and log of the kernel sum (n,)."""
+    mx = logw.max(axis=1, keepdims=True)
+    e = np.exp(logw - mx)
+    s = e.sum(axis=1, keepdims=True)
+    return e / s, (mx + np.log(s))[:, 0]

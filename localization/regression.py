@@ -1,0 +1,406 @@
+"""Regression on an unknown input manifold with GSE (spec gse.md section 3).
+
+GSE is fitted on ``Z = (standardised w, scaled theta)``; the representation maps
+``r(w)`` and ``R(theta)`` are extended off the sample by Jacobian Regression and
+composed with the recovery map: ``psi*(w) = g_v(r*(w))``, ``Phi*(theta) = g_u(R*(theta))``.
+
+A periodic pose column (yaw) enters Z as a (cos, sin) pair of radius
+``theta_scale`` (so Z-space neighbourhoods see the true geometry), and the GSE
+graph is cut open at yaw = +-pi: a closed loop cannot be embedded by the
+least-squares step of spec 2.5 (spec section 9). Every kernel average keeps only
+the neighbours on the nearest neighbour's side of the cut.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from sklearn.base import BaseEstimator
+from sklearn.utils.validation import check_is_fitted
+
+from ._graph import Array, brute_knn, check_2d, knn_graph, same_side
+from .gse import GrassmannStiefelEigenmaps
+from .jacobian_regression import BANDWIDTH_GRID, gaussian_jr, loo_bandwidth
+
+_ARRAYS = ("w_mean_", "theta_center_", "theta_scale_", "theta_", "Gr_", "GR_", "Z_", "tangents_",
+           "frames_", "embedding_", "alignment_eigenvalues_", "frame_condition_")
+
+
+def wrap_angle(a: Array) -> Array:
+    """Wrap angles to (-pi, pi]."""
+    return np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), 2.0 * np.pi)
+
+
+def rrmse(pred: Array, true: Array, periodic: tuple[int, ...] = ()) -> float:
+    """``sqrt(sum |pred - true|^2 / sum |true - mean(true)|^2)``; periodic columns use
+    wrapped differences (and the circular spread for the denominator)."""
+    diff = np.asarray(pred, float) - np.asarray(true, float)
+    dev = np.asarray(true, float) - np.asarray(true, float).mean(axis=0)
+    for c in periodic:
+        diff[:, c] = wrap_angle(diff[:, c])
+        dev[:, c] = wrap_angle(true[:, c] - np.angle(np.exp(1j * true[:, c]).mean()))
+    return float(np.sqrt((diff ** 2).sum() / (dev ** 2).sum()))
+
+
+def pinv_blocks(H: Array, ridge: float = 0.0) -> Array:
+    """``(H^T H + ridge I)^{-1} H^T`` for a batch (n, a, b) -> (n, b, a), by q x q solves."""
+    HtH = np.swapaxes(H, 1, 2) @ H + ridge * np.eye(H.shape[2])
+    return np.linalg.solve(HtH, np.swapaxes(H, 1, 2))
+
+
+class GSERegressor(BaseEstimator):
+    """GSE regression between features w (n, m) and poses theta (n, d).
+
+    Parameters
+    ----------
+    n_components : int or None, default=None
+        Intrinsic dimension q; None = number of Theta columns.
+    n_neighbors : int, default=20
+        Neighbourhood size of GSE and of every kernel average.
+    periodic : tuple of int, default=()
+        Angle columns of Theta (radians); at most one.
+    theta_scale : "auto", float or array of shape (d,), default="auto"
+        Factor lambda applied to theta in Z; "auto" = median of |dw| / |dtheta| over
+        feature-space neighbours, so pose and feature variation in a neighbourhood
+        are comparable (and a disconnected feature sample is not bridged by poses).
+    bandwidth : "auto" or float, default="auto"
+        GSE heat-kernel bandwidth (see :class:`GrassmannStiefelEigenmaps`).
+    grassmann_kernel : str, default="binet_cauchy"
+    project_features : bool, default=False
+        Use ``G_r = G_u^- pi_W`` with pi_W from local PCA of the w-sample.
+    ridge : float, default=0.0
+        Tikhonov term for ``G_v^{-1}``.
+    bandwidth_grid : tuple of float
+        Relative grid for the leave-one-out JR bandwidths.
+    out_of_domain : {"raise", "nan"}, default="raise"
+    random_state : int, default=0
+
+    Attributes
+    ----------
+    gse_ : GrassmannStiefelEigenmaps
+    embedding_ : ndarray of shape (n, q)
+    theta_scale_ : ndarray of shape (d,)
+    bandwidth_w_, bandwidth_theta_ : float
+        LOO bandwidths of r* (standardised w units) and R* (scaled theta units).
+    pose_condition_ : ndarray of shape (n,)
+        cond(G_v) at the samples.
+    """
+
+    def __init__(self, n_components: int | None = None, n_neighbors: int = 20,
+                 periodic: tuple[int, ...] = (), theta_scale: float | str | Array = "auto",
+                 bandwidth: float | str = "auto", grassmann_kernel: str = "binet_cauchy",
+                 project_features: bool = False, ridge: float = 0.0,
+                 bandwidth_grid: tuple[float, ...] = BANDWIDTH_GRID,
+                 out_of_domain: str = "raise", random_state: int = 0,
+                 theta_scale_factor: float = 2.0) -> None:
+        self.n_components = n_components
+        self.n_neighbors = n_neighbors
+        self.periodic = periodic
+        self.theta_scale = theta_scale
+        self.bandwidth = bandwidth
+        self.grassmann_kernel = grassmann_kernel
+        self.project_features = project_features
+        self.ridge = ridge
+        self.bandwidth_grid = bandwidth_grid
+        self.out_of_domain = out_of_domain
+        self.random_state = random_state
+        self.theta_scale_factor = theta_scale_factor
+
+    # ----------------------------------------------------------------- geometry
+    def _periodic(self, d: int) -> tuple[int, ...]:
+        per = tuple(sorted({int(c) for c in self.periodic}))
+        if any(c < 0 or c >= d for c in per):
+            raise ValueError(f"periodic={self.periodic} has columns outside Theta's {d} columns")
+        if len(per) > 1:
+            raise ValueError(f"at most one periodic column is supported, got {per}")
+        return per
+
+    def _lift(self, theta: Array) -> Array:
+        """Pose block of Z: scaled linear columns, (cos, sin) x scale for the angle."""
+        cols = []
+        for c in range(theta.shape[1]):
+            lam = self.theta_scale_[c]
+            if c in self._per:
+                cols += [lam * np.cos(theta[:, c]), lam * np.sin(theta[:, c])]
+            else:
+                cols.append(lam * (theta[:, c] - self.theta_center_[c]))
+        return np.column_stack(cols)
+
+    def _unlift(self, zv: Array) -> Array:
+        out, j = [], 0
+        for c in range(len(self.theta_scale_)):
+            if c in self._per:
+                out.append(np.arctan2(zv[:, j + 1], zv[:, j]))
+                j += 2
+            else:
+                out.append(zv[:, j] / self.theta_scale_[c] + self.theta_center_[c])
+                j += 1
+        return np.column_stack(out)
+
+    def _pose_diff(self, theta: Array, theta_nb: Array) -> Array:
+        """Scaled pose differences (n, k, d), angle differences wrapped."""
+        dt = theta[:, None, :] - theta_nb
+        for c in self._per:
+            dt[..., c] = wrap_angle(dt[..., c])
+        return dt * self.theta_scale_
+
+    def _dlift(self, theta: Array) -> Array:
+        """d(pose block)/d(scaled theta), shape (n, p_v, d)."""
+        n, d = theta.shape
+        E = np.zeros((n, d + len(self._per), d))
+        j = 0
+        for c in range(d):
+            if c in self._per:
+                E[:, j, c], E[:, j + 1, c] = -np.sin(theta[:, c]), np.cos(theta[:, c])
+                j += 2
+            else:
+                E[:, j, c] = 1.0
+                j += 1
+        return E
+
+    def _auto_scale(self, Ws: Array, Theta: Array) -> Array:
+        """Per-column feature sensitivity: median over samples of |dw/dtheta_c| from local
+        least squares of standardised w on theta over pose-space neighbours."""
+        d = Theta.shape[1]
+        self.theta_scale_ = np.ones(d)
+        zv = self._lift(Theta)
+        _, ind = brute_knn(zv, (zv ** 2).sum(axis=1), zv, self.n_neighbors + 1)
+        dT = self._pose_diff(Theta, Theta[ind])
+        dW = Ws[:, None, :] - Ws[ind]
+        A = np.swapaxes(dT, 1, 2) @ dT + 1e-12 * np.eye(d)
+        Jt = np.linalg.solve(A, np.swapaxes(dT, 1, 2) @ dW)  # (n, d, m) = J^T
+        return np.median(np.linalg.norm(Jt, axis=2), axis=0)
+
+    # --------------------------------------------------------------------- fit
+    def fit(self, W: Array, Theta: Array) -> "GSERegressor":
+        """Fit on features ``W`` (n, m) and poses ``Theta`` (n, d)."""
+        W, Theta = check_2d(W, "W"), check_2d(Theta, "Theta")
+        if W.shape[0] != Theta.shape[0]:
+            raise ValueError(f"W has {W.shape[0]} rows but Theta has {Theta.shape[0]}")
+        (n, m), d = W.shape, Theta.shape[1]
+        self._per = self._periodic(d)
+        q = d if self.n_components is None else self.n_components
+        k = self.n_neighbors
+        if n <= k + 1:
+            raise ValueError(f"need more samples than n_neighbors + 1: n={n}, n_neighbors={k}")
+        Theta = Theta.copy()
+        for c in self._per:
+            Theta[:, c] = wrap_angle(Theta[:, c])
+        self.w_mean_ = W.mean(axis=0)
+        self.w_scale_ = float(np.sqrt(W.var(axis=0).mean()))
+        if not self.w_scale_ > 0:
+            raise ValueError("W is constant: features carry no information")
+        Ws = (W - self.w_mean_) / self.w_scale_
+        self.theta_center_ = np.where(np.isin(np.arange(d), self._per), 0.0, Theta.mean(axis=0))
+        dist_w, ind_w = knn_graph(Ws, k)
+        if isinstance(self.theta_scale, str):
+            if self.theta_scale != "auto":
+                raise ValueError(f"theta_scale must be 'auto' or numbers, got {self.theta_scale!r}")
+            self.theta_scale_ = self.theta_scale_factor * self._auto_scale(Ws, Theta)
+        else:
+            self.theta_scale_ = np.broadcast_to(np.asarray(self.theta_scale, float), (d,)).copy()
+        if not np.all(self.theta_scale_ > 0):
+            raise ValueError(f"theta_scale must be positive, got {self.theta_scale_}")
+        self.theta_ = Theta
+        Z = np.column_stack([Ws, self._lift(Theta)])
+        self.gse_ = GrassmannStiefelEigenmaps(
+            q, n_neighbors=k, bandwidth=self.bandwidth, grassmann_kernel=self.grassmann_kernel,
+            out_of_domain=self.out_of_domain, random_state=self.random_state)
+        self.gse_.fit(Z, cut=Theta[:, self._per[0]] if self._per else None)
+        H = self.gse_.frames_
+        self.Gr_ = pinv_blocks(H[:, :m, :])
+        if self.project_features:
+            w = np.exp(-0.5 * (dist_w / (0.5 * np.median(dist_w[:, -1]))) ** 2)
+            from ._graph import local_pca
+            U = local_pca(Ws, Ws, ind_w, w, q)
+            self.Gr_ = (self.Gr_ @ U) @ np.swapaxes(U, 1, 2)
+        Hv = H[:, m:, :]
+        self.GR_ = pinv_blocks(Hv, self.ridge) @ self._dlift(Theta)
+        s = np.linalg.svd(Hv, compute_uv=False)
+        self.pose_condition_ = s[:, 0] / np.maximum(s[:, -1], np.finfo(float).tiny)
+        self._setup()
+        # leave-one-out bandwidths of the two Jacobian regressions
+        y = self.embedding_
+        mask = same_side(self.theta_[ind_w][..., self._per[0]]) if self._per else None
+        grid = np.asarray(self.bandwidth_grid)
+        self.bandwidth_w_, _ = loo_bandwidth(
+            Ws[:, None, :] - Ws[ind_w], y[ind_w], self.Gr_[ind_w], y,
+            grid * np.median(dist_w[:, -1]), mask)
+        d2, ind_t = brute_knn(self._zv, self._zv_sqn, self._zv, k + 1)
+        ind_t = ind_t[:, 1:]
+        dX = self._pose_diff(Theta, Theta[ind_t])
+        mask = same_side(self.theta_[ind_t][..., self._per[0]]) if self._per else None
+        self.bandwidth_theta_, _ = loo_bandwidth(
+            dX, y[ind_t], self.GR_[ind_t], y,
+            grid * np.median(np.linalg.norm(dX[:, -1], axis=1)), mask)
+        return self
+
+    def _setup(self) -> None:
+        """Derived per-sample query structures (after fit or load)."""
+        m = len(self.w_mean_)
+        self._ws = self.gse_.Z_[:, :m]
+        self._ws_sqn = (self._ws ** 2).sum(axis=1)
+        self._zv = self.gse_.Z_[:, m:]
+        self._zv_sqn = (self._zv ** 2).sum(axis=1)
+        self.embedding_ = self.gse_.embedding_
+
+    # ----------------------------------------------------------------- predict
+    def _check(self, X: Array, name: str, n_cols: int) -> Array:
+        check_is_fitted(self, "gse_")
+        return check_2d(X, name, n_cols)
+
+    def _flag(self, log_sum: Array, what: str, *outs: Array) -> None:
+        bad = log_sum < np.log(self.gse_.min_kernel_sum)
+        if bad.any():
+            if self.out_of_domain == "raise":
+                raise ValueError(f"{bad.sum()} {what} row(s) are outside the training domain "
+                                 f"(kernel sum < {self.gse_.min_kernel_sum:g}), first row "
+                                 f"{int(np.flatnonzero(bad)[0])}")
+            for o in outs:
+                if o is not None:
+                    o[bad] = np.nan
+
+    def _r_star(self, W: Array, jacobian: bool) -> tuple[Array, Array | None]:
+        W = self._check(W, "W", len(self.w_mean_))
+        Ws = (W - self.w_mean_) / self.w_scale_
+        _, ind = brute_knn(self._ws, self._ws_sqn, Ws, self.n_neighbors)
+        mask = same_side(self.theta_[ind][..., self._per[0]]) if self._per else None
+        r, J, log_sum = gaussian_jr(Ws[:, None, :] - self._ws[ind], self.embedding_[ind],
+                                    self.Gr_[ind], self.bandwidth_w_, mask, jacobian)
+        if J is not None:
+            J /= self.w_scale_
+        self._flag(log_sum, "W", r, J)
+        return r, J
+
+    def _R_star(self, Theta: Array, jacobian: bool) -> tuple[Array, Array | None]:
+        Theta = self._check(Theta, "Theta", len(self.theta_scale_)).copy()
+        for c in self._per:
+            Theta[:, c] = wrap_angle(Theta[:, c])
+        _, ind = brute_knn(self._zv, self._zv_sqn, self._lift(Theta), self.n_neighbors)
+        mask = same_side(self.theta_[ind][..., self._per[0]]) if self._per else None
+        R, J, log_sum = gaussian_jr(self._pose_diff(Theta, self.theta_[ind]), self.embedding_[ind],
+                                    self.GR_[ind], self.bandwidth_theta_, mask, jacobian)
+        if J is not None:
+            J *= self.theta_scale_
+        self._flag(log_sum, "Theta", R, J)
+        return R, J
+
+    def embed(self, W: Array) -> Array:
+        """r*(w): representation of features, shape (n, q)."""
+        return self._r_star(W, False)[0]
+
+    def embed_jacobian(self, W: Array) -> Array:
+        """Exact d r*/dw in original feature units, shape (n, q, m)."""
+        return self._r_star(W, True)[1]
+
+    def embed_pose(self, Theta: Array) -> Array:
+        """R*(theta): representation of poses, shape (n, q)."""
+        return self._R_star(Theta, False)[0]
+
+    def embed_pose_jacobian(self, Theta: Array) -> Array:
+        """Exact d R*/dtheta (angles in radians), shape (n, q, d)."""
+        return self._R_star(Theta, True)[1]
+
+    def predict(self, W: Array) -> Array:
+        """psi*(w) = g_v(r*(w)): poses (n, d), angles wrapped to (-pi, pi]."""
+        r, _ = self._r_star(W, False)
+        zv, _, _ = self.gse_._recover(r, slice(len(self.w_mean_), None))
+        return self._unlift(zv)
+
+    def predict_features(self, Theta: Array) -> Array:
+        """Phi*(theta) = g_u(R*(theta)): features (n, m) in original units."""
+        R, _ = self._R_star(Theta, False)
+        gu, _, _ = self.gse_._recover(R, slice(0, len(self.w_mean_)))
+        return gu * self.w_scale_ + self.w_mean_
+
+    def features_jacobian(self, Theta: Array) -> Array:
+        """Exact dPhi*/dtheta (n, m, d) in original units (angles in radians): EKF's H."""
+        R, JR = self._R_star(Theta, True)
+        _, Jg, _ = self.gse_._recover(R, slice(0, len(self.w_mean_)), jacobian=True)
+        return self.w_scale_ * (Jg @ JR)
+
+    # --------------------------------------------------------------- persistence
+    def save(self, path: str | Path) -> None:
+        """Save to ``.npz`` (no pickles; settings as a JSON string)."""
+        check_is_fitted(self, "gse_")
+        g = self.gse_
+        settings = dict(params={k: (list(v) if isinstance(v, tuple) else v)
+                                for k, v in self.get_params().items()},
+                        gse_params=g.get_params(), w_scale_=self.w_scale_,
+                        bandwidth_w_=self.bandwidth_w_, bandwidth_theta_=self.bandwidth_theta_,
+                        gse_bandwidth_=g.bandwidth_, n_edges_=g.n_edges_, format=1)
+        if isinstance(settings["params"]["theta_scale"], np.ndarray):
+            settings["params"]["theta_scale"] = settings["params"]["theta_scale"].tolist()
+        arrays = {k: getattr(self, k) if hasattr(self, k) else getattr(g, k) for k in _ARRAYS}
+        arrays["cut_"] = np.zeros(0) if g.cut_ is None else g.cut_
+        np.savez(path, settings=np.array(json.dumps(settings)), **arrays)
+
+    @classmethod
+    def load(cls, path: str | Path) -> "GSERegressor":
+        """Load a model written by :meth:`save`; ValueError if corrupt or incomplete."""
+        try:
+            with np.load(path, allow_pickle=False) as f:
+                data = {k: f[k] for k in f.files}
+            s = json.loads(str(data["settings"]))
+            p = s["params"]
+            p["periodic"] = tuple(p["periodic"])
+            p["bandwidth_grid"] = tuple(p["bandwidth_grid"])
+            self = cls(**p)
+            g = GrassmannStiefelEigenmaps(**s["gse_params"])
+            for k in _ARRAYS:
+                setattr(self if k.endswith(("mean_", "center_", "scale_")) or k in
+                        ("theta_", "Gr_", "GR_") else g, k, np.asarray(data[k], dtype=np.float64))
+            g.cut_ = data["cut_"] if data["cut_"].size else None
+            g.bandwidth_, g.n_edges_ = float(s["gse_bandwidth_"]), int(s["n_edges_"])
+            g.n_components_graph_ = 1
+            self.w_scale_ = float(s["w_scale_"])
+            self.bandwidth_w_, self.bandwidth_theta_ = (float(s["bandwidth_w_"]),
+                                                        float(s["bandwidth_theta_"]))
+            n, p_, q = g.frames_.shape
+            m, d = len(self.w_mean_), len(self.theta_scale_)
+            self._per = self._periodic(d)
+            shapes_ok = (g.Z_.shape == (n, p_) and g.tangents_.shape == (n, p_, q)
+                         and g.embedding_.shape == (n, q) and self.theta_.shape == (n, d)
+                         and self.Gr_.shape == (n, q, m) and self.GR_.shape == (n, q, d)
+                         and p_ == m + d + len(self._per)
+                         and (g.cut_ is None or g.cut_.shape == (n,)))
+            if not shapes_ok:
+                raise ValueError("inconsistent array shapes")
+            if not all(np.isfinite(getattr(self if hasattr(self, k) else g, k)).all()
+                       for k in ("Z_", "frames_", "embedding_", "Gr_", "GR_")):
+                raise ValueError("non-finite values")
+        except Exception as exc:  # zipfile, KeyError, JSON, shape errors -> one clear message
+            raise ValueError(f"cannot load GSERegressor from {path}: corrupted or incomplete "
+                             f"file ({type(exc).__name__}: {exc})") from exc
+        g._setup()
+        self.gse_ = g
+        self._setup()
+        return self
+
+
+def select_n_neighbors(W: Array, Theta: Array, grid: tuple[int, ...] = (10, 15, 20, 30),
+                       cv: int = 3, random_state: int = 0, **params: object
+                       ) -> tuple[int, dict[int, float]]:
+    """Choose ``n_neighbors`` by K-fold cross-validation of psi* (pose RRMSE).
+
+    Returns the best k and the mean validation RRMSE for every k in ``grid``
+    (``inf`` where a fit failed, e.g. a disconnected graph for small k).
+    """
+    W, Theta = check_2d(W, "W"), check_2d(Theta, "Theta")
+    folds = np.array_split(np.random.default_rng(random_state).permutation(len(W)), cv)
+    periodic = tuple(params.get("periodic", ()))  # type: ignore[arg-type]
+    scores: dict[int, float] = {}
+    for k in grid:
+        errs = []
+        for f in folds:
+            tr = np.setdiff1d(np.arange(len(W)), f)
+            try:
+                model = GSERegressor(n_neighbors=k, **params).fit(W[tr], Theta[tr])  # type: ignore[arg-type]
+                pred = GSERegressor.predict(model, W[f])
+                errs.append(rrmse(pred, Theta[f], periodic))
+            except ValueError:
+                errs.append(np.inf)
+        scores[k] = float(np.mean(errs))
+    return min(scores, key=scores.get), scores  # type: ignore[arg-type]
