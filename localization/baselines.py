@@ -121,15 +121,20 @@ class _PoseRegressorBase(BaseEstimator, RegressorMixin):
 
     # -- persistence ---------------------------------------------------------------
     def save(self, path: str | os.PathLike) -> None:
-        """Write training data and settings to an ``.npz`` (``allow_pickle=False``)."""
+        """Write training data and settings to ``path`` (npz format, exactly that name).
+
+        Arrays ``X_train``, ``Y_train`` and ``settings`` (a JSON string with the
+        constructor parameters and fitted scalars); readable with ``allow_pickle=False``.
+        """
         check_is_fitted(self, "X_train_")
         params = self.get_params()
         params = {k: _jsonable(v) for k, v in params.items()}
         fitted = {k: _jsonable(getattr(self, k)) for k in self._fitted_scalars}
         settings = {"class": type(self).__name__, "params": params, "fitted": fitted,
                     "y_1d": bool(self.y_1d_)}
-        np.savez(path, X_train=self.X_train_, Y_train=self.Y_train_,
-                 settings=np.array(json.dumps(settings)))
+        with open(path, "wb") as fh:  # a file handle: numpy must not append ".npz"
+            np.savez(fh, X_train=self.X_train_, Y_train=self.Y_train_,
+                     settings=np.array(json.dumps(settings)))
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> _PoseRegressorBase:

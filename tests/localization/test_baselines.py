@@ -118,7 +118,7 @@ def test_save_load_round_trip(model, tmp_path):
     W, T, _ = regression_manifold(200, dim_theta=3, seed=0)
     Wt, _, _ = regression_manifold(30, dim_theta=3, seed=1)
     model.fit(W, T)
-    path = tmp_path / "model.npz"
+    path = tmp_path / "model.bin"  # any name: save must not append ".npz"
     model.save(path)
     loaded = type(model).load(path)
     np.testing.assert_array_equal(loaded.predict(Wt), model.predict(Wt))
