@@ -1,5 +1,6 @@
 """The generated city: determinism, free space, street graph, route, MJCF."""
 
+import envs  # noqa: F401  (first: chooses MUJOCO_GL before mujoco is imported)
 import mujoco
 import numpy as np
 import pytest
