@@ -65,8 +65,10 @@ class City:
     size : float — side of the square city in metres.
     street_width : float — street width in metres.
     street_centers : (k,) float — coordinates of the street centrelines (same on x and y).
-    buildings : list of Building.
+    buildings : list of Building — the collidable buildings inside the city.
     seed : int — the generating seed.
+    skyline : list of Building — visual-only towers outside the city (beyond the boundary
+        walls) so that views out of the city still differ from place to place.
     """
 
     size: float
@@ -74,6 +76,7 @@ class City:
     street_centers: NDArray[np.float64]
     buildings: list[Building] = field(default_factory=list)
     seed: int = 0
+    skyline: list[Building] = field(default_factory=list)
 
     # ------------------------------------------------------------------ geometry
     @property
@@ -231,6 +234,14 @@ class City:
                 f'<geom name="building{i}" type="box" pos="{pos}" size="{size}" material="mat{i}" '
                 'contype="2" conaffinity="2" group="2"/>'
             )
+        for i, b in enumerate(self.skyline):
+            pos = " ".join(f"{v:.3f}" for v in b.center)
+            size = " ".join(f"{v:.3f}" for v in b.half_size)
+            rgba = " ".join(f"{v:.3f}" for v in b.rgb)
+            geoms.append(
+                f'<geom name="skyline{i}" type="box" pos="{pos}" size="{size}" rgba="{rgba} 1" '
+                'contype="0" conaffinity="0" group="2"/>'
+            )
         for name, (x, y, hx, hy) in {  # invisible walls keep the robot in the city
             "E": (h + 0.25, 0, 0.25, h + 0.5), "W": (-h - 0.25, 0, 0.25, h + 0.5),
             "N": (0, h + 0.25, h + 0.5, 0.25), "S": (0, -h - 0.25, h + 0.5, 0.25),
@@ -366,8 +377,23 @@ def generate_city(
         buildings = [b for b in buildings if not _overlaps(b, c, r)]
         rgb = _LANDMARK_COLOURS[rank % len(_LANDMARK_COLOURS)]
         buildings.append(Building((c[0], c[1], 0.5 * height), (r, r, 0.5 * height), tuple(rgb), tuple(rgb * 0.4), True))
+    skyline = _skyline(rng, 0.5 * city_size)
     return City(size=float(city_size), street_width=float(street_width), street_centers=centers,
-                buildings=buildings, seed=int(seed))
+                buildings=buildings, seed=int(seed), skyline=skyline)
+
+
+def _skyline(rng: np.random.Generator, half: float, per_side: int = 6) -> list[Building]:
+    """Visual-only towers 2-9 m outside each side of the city, of random size and colour."""
+    out = []
+    for side in range(4):
+        along = np.sort(rng.uniform(-half - 4.0, half + 4.0, per_side))
+        for a in along:
+            d = half + rng.uniform(2.0, 9.0)
+            w, depth, height = rng.uniform(0.8, 2.5), rng.uniform(0.8, 2.5), rng.uniform(2.0, 12.0)
+            x, y, hx, hy = [(d, a, depth, w), (a, d, w, depth), (-d, a, depth, w), (a, -d, w, depth)][side]
+            rgb = _random_colour(rng) * rng.uniform(0.6, 1.0)
+            out.append(Building((x, y, 0.5 * height), (0.5 * hx, 0.5 * hy, 0.5 * height), tuple(rgb), tuple(rgb)))
+    return out
 
 
 def _overlaps(b: Building, c: NDArray[np.float64], r: float) -> bool:
