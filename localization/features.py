@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import os
 from collections.abc import Iterator
 from typing import Any, ClassVar
 
@@ -87,8 +88,16 @@ def batched(n: int, batch_size: int, progress: bool, desc: str) -> Iterator[slic
         yield slice(s, min(s + batch_size, n))
 
 
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, os.PathLike):
+        return os.fspath(obj)
+    raise TypeError(f"setting of type {type(obj).__name__} is not JSON-serialisable: {obj!r}")
+
+
 def _json_array(settings: dict[str, Any]) -> np.ndarray:
-    return np.array(json.dumps(settings, sort_keys=True))
+    return np.array(json.dumps(settings, sort_keys=True, default=_json_default))
 
 
 def read_settings(state: dict[str, np.ndarray]) -> dict[str, Any]:

@@ -62,7 +62,8 @@ def images() -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def cnn_weights(images: np.ndarray, tmp_path_factory: pytest.TempPathFactory) -> str:
-    model = train_small_cnn(images, epochs=4, seed=0, batch_size=16, progress=False)
+    model = train_small_cnn(images, epochs=3, seed=0, batch_size=16, embedding_dim=32, width=16,
+                            progress=False)
     path = tmp_path_factory.mktemp("cnn") / "small_cnn.pt"
     save_small_cnn(model, path)
     return str(path)
@@ -77,6 +78,7 @@ def extractors(weights: str) -> list:
 
 def test_shapes_dtypes_determinism_and_state_roundtrip(images, cnn_weights, tmp_path):
     dims = [16, 8, 1280, 12, 16]
+    images = images[::2]
     for ext, m in zip(extractors(cnn_weights), dims):
         z = ext.fit(images).transform(images)
         assert z.shape == (len(images), m) and z.dtype == np.float64, type(ext)
@@ -117,6 +119,15 @@ def test_bad_inputs(ext, images):
         ext.transform(images[:2, :32, :32])
     with pytest.raises(ValueError, match="state is for features"):
         type(ext).from_state({"settings": np.array('{"kind": "other"}')})
+
+
+def test_state_settings_accept_paths_and_numpy_scalars(images, cnn_weights):
+    from pathlib import Path
+
+    ext = SmallCNNFeatures(np.int64(4), weights=Path(cnn_weights), progress=False).fit(images)
+    loaded = features_from_state(ext.get_state())
+    assert loaded.n_components == 4 and loaded.weights == cnn_weights
+    np.testing.assert_array_equal(loaded.transform(images), ext.transform(images))
 
 
 def test_check_images_accepts_lists_of_uint8():
@@ -165,7 +176,7 @@ def test_features_change_smoothly_with_shifts(cnn_weights):
     and the feature distance grows with the shift."""
     panos = panoramas(4, 1)
     offsets = np.arange(20, 36)
-    for ext in extractors(cnn_weights):
+    for ext in extractors(cnn_weights)[:3] + extractors(cnn_weights)[4:]:
         seqs = [crops(p, offsets) for p in panos]
         ext.fit(np.concatenate(seqs))
         feats = [ext.transform(seq) for seq in seqs]
