@@ -99,12 +99,8 @@ def cube_face_lookup(
 
     The face is the one whose forward axis has the largest dot product with ``d``
     (the dominant component with its sign); then ``a = <d, right> / <d, forward>``
-    and ``b = <d, up> / <d, forward>``, both in ``[-1, 1]``.
-
-    Parameters
-    ----------
-    directions : array_like, shape (..., 3)
-        Directions in the camera frame (need not be unit length).
+    and ``b = <d, up> / <d, forward>``, both in ``[-1, 1]``. ``directions`` has
+    shape (..., 3), camera frame, any non-zero length.
 
     Returns
     -------
@@ -130,20 +126,9 @@ def cube_face_pixel(
 
     ``col = (a + 1) / 2 * F + pad - 1/2`` and ``row = (1 - b) / 2 * F + pad - 1/2``,
     in units where pixel ``(i, j)`` of the padded ``G x G`` face has its centre at
-    ``(row, col) = (i, j)``.
-
-    Parameters
-    ----------
-    directions : array_like, shape (..., 3)
-    face_size : int
-        ``F``, pixels across the 90-degree face.
-    pad : int
-        Extra pixels on each side of a face.
-
-    Returns
-    -------
-    face : ndarray of intp, shape (...)
-    row, col : ndarray of float64, shape (...)
+    ``(row, col) = (i, j)``. ``directions`` has shape (..., 3); ``face_size`` is ``F``
+    and ``pad`` the extra pixels per side. Returns ``face`` (intp), ``row`` and ``col``
+    (float64), each of shape (...).
     """
     face, a, b = cube_face_lookup(directions)
     f = float(face_size)
@@ -244,14 +229,8 @@ def fisheye_project(
 
     ``t = atan2(sqrt(x^2 + y^2), -z)``, ``r = f t``,
     ``u = cx + r x / sqrt(x^2 + y^2)``, ``v = cy - r y / sqrt(x^2 + y^2)``
-    (the optical axis ``-z`` lands on the centre ``(W/2, H/2)``).
-
-    Parameters
-    ----------
-    directions : array_like, shape (..., 3)
-    size : int or (H, W)
-    fov : float
-        Full field of view in degrees.
+    (the optical axis ``-z`` lands on the centre ``(W/2, H/2)``). ``directions`` has
+    shape (..., 3); ``size`` and ``fov`` as in :func:`fisheye_directions`.
 
     Returns
     -------
@@ -338,7 +317,8 @@ def catadioptric_project(
     """Project camera-frame directions into the catadioptric ring image.
 
     ``az = atan2(-x, -z)``, ``el = asin(y)`` (unit ``d``), then ``r`` and ``(u, v)``
-    as in :func:`catadioptric_directions`.
+    as in :func:`catadioptric_directions`, which documents the other parameters;
+    ``directions`` has shape (..., 3).
 
     Returns
     -------
