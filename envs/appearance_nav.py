@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from envs.cameras import TopDownView, check_image_size, make_camera
 from envs.motion_model import UnicycleModel, wrap_angle
-from envs.robot import ACTUATOR_XML, HALF_TRACK, ROBOT_GEOMS, ROBOT_RADIUS, ROBOT_XML, WHEEL_RADIUS
+from envs.robot import ACTUATOR_XML, HALF_TRACK, ROBOT_GEOMS, ROBOT_RADIUS, ROBOT_XML, SENSOR_XML, WHEEL_RADIUS
 from envs.scene import City, generate_city
 
 __all__ = ["AppearanceNavEnv"]
@@ -99,7 +99,8 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         self.frame_skip = int(frame_skip)
 
         self.city: City = generate_city(scene_seed, city_size, block_size, street_width)
-        self.model = mujoco.MjModel.from_xml_string(self.city.to_mjcf(ROBOT_XML, "", ACTUATOR_XML))
+        self.model = mujoco.MjModel.from_xml_string(self.city.to_mjcf(ROBOT_XML, "", ACTUATOR_XML, SENSOR_XML))
+        self.city.paint_textures(self.model)
         self.data = mujoco.MjData(self.model)
         self.dt = self.model.opt.timestep * self.frame_skip
         self.motion_model = UnicycleModel(self.dt)
@@ -125,10 +126,8 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         m = self.model
         self._root_qpos = m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "root")]
         self._goal_mocap = m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "goal")]
-        self._is_building = np.array(
-            [(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or "").startswith(("building", "wall"))
-             for g in range(m.ngeom)]
-        )
+        sensor = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, "collision")
+        self._collision_adr = m.sensor_adr[sensor]
         self.robot_geom_ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, n) for n in ROBOT_GEOMS]
 
     # ------------------------------------------------------------------ API
@@ -163,16 +162,18 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         u = self._check_action(action)
         self.data.ctrl[:] = self._wheel_speeds(u)
         collision = False
-        for _ in range(self.frame_skip):
+        for _ in range(self.frame_skip):  # the contact sensor sees the state at the start of each substep
             mujoco.mj_step(self.model, self.data)
-            collision = collision or self._building_contact()
+            collision = collision or self.data.sensordata[self._collision_adr] > 0
+        self._sync_kinematics()
         self._steps += 1
-        distance = self._distance_to_goal()
+        pose = self.pose
+        distance = float(np.hypot(pose[0] - self._goal[0], pose[1] - self._goal[1]))
         reward = (self._distance - distance) - self.STEP_COST - self.COLLISION_PENALTY * collision
         self._distance = distance
         terminated = distance < self.GOAL_RADIUS
         truncated = self.max_episode_steps is not None and self._steps >= self.max_episode_steps
-        return self._obs(), float(reward), bool(terminated), bool(truncated), self._info(collision, u)
+        return self._obs(), float(reward), bool(terminated), bool(truncated), self._info(collision, u, pose)
 
     def render(self) -> NDArray[np.uint8] | None:
         """Return a top-down view (north up) of the city, robot and goal, or None without a render mode."""
@@ -216,23 +217,27 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         return self._camera.render(self.data)
 
     # ------------------------------------------------------------------ helpers
+    def _sync_kinematics(self) -> None:
+        """Bring body and camera frames to the final qpos (mj_step leaves them one substep behind)."""
+        mujoco.mj_kinematics(self.model, self.data)
+        mujoco.mj_comPos(self.model, self.data)
+        mujoco.mj_camlight(self.model, self.data)
+
     def _obs(self) -> Obs:
         return {"image": self._camera.render(self.data), "goal": self._goal.astype(np.float32)}
 
-    def _info(self, collision: bool, control: NDArray[np.float64]) -> dict[str, Any]:
+    def _info(self, collision: bool, control: NDArray[np.float64], pose: NDArray[np.float64] | None = None
+              ) -> dict[str, Any]:
+        pose = self.pose if pose is None else pose
         return {
-            "pose": self.pose,
+            "pose": pose,
             "collision": bool(collision),
-            "distance_to_goal": float(self._distance_to_goal()),
+            "distance_to_goal": float(np.hypot(pose[0] - self._goal[0], pose[1] - self._goal[1])),
             "control": np.asarray(control, dtype=np.float64),
         }
 
     def _distance_to_goal(self) -> float:
         return float(np.hypot(*(self.pose[:2] - self._goal)))
-
-    def _building_contact(self) -> bool:
-        n = self.data.ncon
-        return bool(n) and bool(self._is_building[self.data.contact.geom[:n]].any())
 
     def _wheel_speeds(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
         v, w = u

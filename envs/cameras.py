@@ -144,7 +144,6 @@ class TopDownView:
     pixels : int — side of the square image.
     """
 
-    STREET = np.array([90, 90, 96], np.uint8)
     ROBOT = np.array([255, 255, 255], np.uint8)
     HEADING = np.array([230, 30, 30], np.uint8)
     GOAL = np.array([30, 220, 60], np.uint8)
@@ -155,8 +154,7 @@ class TopDownView:
         centres = lo + (np.arange(self.pixels) + 0.5) * (hi - lo) / self.pixels
         self._x, self._y = np.meshgrid(centres, centres[::-1])  # row 0 is north
         self._px = (hi - lo) / self.pixels
-        base = np.empty((self.pixels, self.pixels, 3), np.uint8)
-        base[:] = self.STREET
+        base = city.ground_image(self.pixels, extent=city.half)
         for b in city.buildings:
             (cx, cy, _), (hx, hy, _) = b.center, b.half_size
             mask = (np.abs(self._x - cx) < hx) & (np.abs(self._y - cy) < hy)

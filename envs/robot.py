@@ -5,6 +5,8 @@ sphere under a box chassis (plus a front caster 1 cm off the ground that stops
 the robot tipping forward when braking), on a free joint. The camera ``"ego"`` sits on a
 mast above the front axle, looking along the robot's heading (+x of the body):
 MuJoCo cameras look along their local -z with y up, hence ``xyaxes="0 -1 0 0 0 1"``.
+The robot's geoms are in geom group 3, which cameras do not draw by default: the
+robot never sees itself and costs no draw calls.
 """
 
 from __future__ import annotations
@@ -22,23 +24,23 @@ ROBOT_XML = f"""
     <body name="robot" pos="0 0 {WHEEL_RADIUS}">
       <freejoint name="root"/>
       <geom name="chassis" type="box" pos="-0.03 0 0.03" size="0.16 0.1 0.04" rgba="0.9 0.9 0.9 1"
-            mass="2.0" contype="2" conaffinity="2"/>
+            mass="2.0" contype="2" conaffinity="2" group="3"/>
       <geom name="mast" type="cylinder" pos="0.08 0 0.18" size="0.015 0.12" rgba="0.2 0.2 0.2 1"
-            mass="0.05" contype="0" conaffinity="0"/>
+            mass="0.05" contype="0" conaffinity="0" group="3"/>
       <geom name="caster" type="sphere" pos="-0.14 0 -0.025" size="0.025" condim="1" mass="0.05"
-            rgba="0.2 0.2 0.2 1" contype="1" conaffinity="1"/>
+            rgba="0.2 0.2 0.2 1" contype="1" conaffinity="1" group="3"/>
       <geom name="caster_front" type="sphere" pos="0.1 0 -0.015" size="0.025" condim="1" mass="0.05"
-            rgba="0.2 0.2 0.2 1" contype="1" conaffinity="1"/>
+            rgba="0.2 0.2 0.2 1" contype="1" conaffinity="1" group="3"/>
       <camera name="ego" pos="0.1 0 {CAMERA_HEIGHT - WHEEL_RADIUS}" xyaxes="0 -1 0 0 0 1" fovy="{CAMERA_FOVY}"/>
       <body name="wheel_left" pos="0 {HALF_TRACK} 0">
         <joint name="left" type="hinge" axis="0 1 0" armature="0.001" damping="0.001"/>
         <geom name="wheel_left" type="sphere" size="{WHEEL_RADIUS}" mass="0.2"
-              friction="1.2 0.01 0.001" rgba="0.1 0.1 0.1 1" contype="3" conaffinity="3"/>
+              friction="1.2 0.01 0.001" rgba="0.1 0.1 0.1 1" contype="3" conaffinity="3" group="3"/>
       </body>
       <body name="wheel_right" pos="0 {-HALF_TRACK} 0">
         <joint name="right" type="hinge" axis="0 1 0" armature="0.001" damping="0.001"/>
         <geom name="wheel_right" type="sphere" size="{WHEEL_RADIUS}" mass="0.2"
-              friction="1.2 0.01 0.001" rgba="0.1 0.1 0.1 1" contype="3" conaffinity="3"/>
+              friction="1.2 0.01 0.001" rgba="0.1 0.1 0.1 1" contype="3" conaffinity="3" group="3"/>
       </body>
     </body>
     <body name="goal" mocap="true" pos="0 0 0.01">
@@ -55,3 +57,8 @@ ACTUATOR_XML = f"""
 """
 
 ROBOT_GEOMS = ("chassis", "caster", "caster_front", "wheel_left", "wheel_right")
+
+# 1 while any robot geom touches a geom of the static body "city" (buildings, boundary walls)
+SENSOR_XML = """
+    <contact name="collision" subtree1="robot" body2="city" num="1" data="found"/>
+"""

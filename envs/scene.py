@@ -26,6 +26,7 @@ _LANDMARK_COLOURS = np.array(
     [[0.9, 0.1, 0.1], [0.1, 0.3, 0.95], [0.95, 0.85, 0.1], [0.1, 0.8, 0.2], [0.8, 0.1, 0.8]]
 )
 # horizon walls: distinct colours per side so heading is visible from far away
+GROUND_PIXELS = 1024  # floor texture side
 _HORIZON = {"E": (0.85, 0.55, 0.35), "N": (0.45, 0.6, 0.85), "W": (0.55, 0.8, 0.55), "S": (0.8, 0.75, 0.5)}
 
 
@@ -125,12 +126,6 @@ class City:
             object.__setattr__(self, "_fp_cache", cached)
         return cached
 
-    def on_street(self, x: float, y: float, margin: float = 0.0) -> bool:
-        """Return whether (x, y) lies on a street with ``margin`` to its edges."""
-        half_w = 0.5 * self.street_width - margin
-        near = np.abs(self.street_centers - x).min() <= half_w or np.abs(self.street_centers - y).min() <= half_w
-        return bool(near) and abs(x) <= self.half - margin and abs(y) <= self.half - margin
-
     def random_free_pose(self, rng: np.random.Generator, margin: float = 0.3) -> NDArray[np.float64]:
         """Draw a uniform pose ``[x, y, yaw]`` on the streets (``margin`` from buildings), shape (3,)."""
         for _ in range(10_000):
@@ -194,75 +189,28 @@ class City:
         return np.array([nodes[i * k + j] for i, j in order])
 
     # ------------------------------------------------------------------ MJCF
-    def to_mjcf(self, robot_xml: str = "", robot_assets: str = "", actuators: str = "", timestep: float = 0.005) -> str:
+    def to_mjcf(self, robot_xml: str = "", robot_assets: str = "", actuators: str = "", sensors: str = "",
+                timestep: float = 0.005) -> str:
         """Return a MuJoCo MJCF document for the city (plus optional robot parts).
+
+        The collidable buildings and the invisible boundary walls are geoms of the static
+        body ``"city"`` (so a contact sensor can watch them); floor, skyline and horizon walls
+        are visual-only world geoms. The floor texture is a placeholder until
+        :meth:`paint_textures` is applied to the compiled model.
 
         Parameters
         ----------
         robot_xml : str — body XML inserted into ``<worldbody>``.
         robot_assets : str — XML inserted into ``<asset>``.
         actuators : str — XML inserted into ``<actuator>``.
+        sensors : str — XML inserted into ``<sensor>``.
         timestep : float — physics step (s); 5 ms keeps the wheel contacts smooth.
         """
-        h = self.half
-        far = h + 12.0
+        far = self.floor_half() - 2.0  # horizon walls
         extent = 2.0 * far  # znear/zfar are in units of the extent
-        assets = [
-            '<texture name="ground" type="2d" builtin="checker" width="64" height="64" '
-            'rgb1="0.32 0.32 0.34" rgb2="0.36 0.36 0.38"/>',
-            '<material name="ground" texture="ground" texrepeat="1 1" texuniform="true"/>',
-        ]
-        geoms = [
-            f'<geom name="floor" type="plane" size="{far + 2:.3f} {far + 2:.3f} {far + 2:.3f}" material="ground" '
-            'contype="1" conaffinity="1" group="0"/>'
-        ]
-        for s in self.street_centers:  # lane markings (visual only)
-            for x0, y0, hx, hy in ((s, 0.0, 0.04, h), (0.0, s, h, 0.04)):
-                geoms.append(
-                    f'<geom type="box" pos="{x0:.3f} {y0:.3f} 0.001" size="{hx:.3f} {hy:.3f} 0.001" '
-                    'rgba="0.9 0.9 0.8 1" contype="0" conaffinity="0" group="1"/>'
-                )
-        for i, b in enumerate(self.buildings):
-            r1, r2 = " ".join(f"{v:.3f}" for v in b.rgb), " ".join(f"{v:.3f}" for v in b.window_rgb)
-            assets.append(
-                f'<texture name="tex{i}" type="2d" builtin="checker" width="32" height="32" rgb1="{r1}" rgb2="{r2}"/>'
-            )
-            assets.append(f'<material name="mat{i}" texture="tex{i}" texrepeat="2 2.5" texuniform="true"/>')
-            pos = " ".join(f"{v:.3f}" for v in b.center)
-            size = " ".join(f"{v:.3f}" for v in b.half_size)
-            geoms.append(
-                f'<geom name="building{i}" type="box" pos="{pos}" size="{size}" material="mat{i}" '
-                'contype="2" conaffinity="2" group="2"/>'
-            )
-        for i, b in enumerate(self.skyline):
-            pos = " ".join(f"{v:.3f}" for v in b.center)
-            size = " ".join(f"{v:.3f}" for v in b.half_size)
-            rgba = " ".join(f"{v:.3f}" for v in b.rgb)
-            geoms.append(
-                f'<geom name="skyline{i}" type="box" pos="{pos}" size="{size}" rgba="{rgba} 1" '
-                'contype="0" conaffinity="0" group="2"/>'
-            )
-        for name, (x, y, hx, hy) in {  # invisible walls keep the robot in the city
-            "E": (h + 0.25, 0, 0.25, h + 0.5), "W": (-h - 0.25, 0, 0.25, h + 0.5),
-            "N": (0, h + 0.25, h + 0.5, 0.25), "S": (0, -h - 0.25, h + 0.5, 0.25),
-        }.items():
-            geoms.append(
-                f'<geom name="wall{name}" type="box" pos="{x} {y} 0.5" size="{hx} {hy} 0.5" '
-                'rgba="1 1 1 0" contype="2" conaffinity="2" group="3"/>'
-            )
-        for name, (x, y, hx, hy) in {
-            "E": (far, 0, 0.5, far), "W": (-far, 0, 0.5, far), "N": (0, far, far, 0.5), "S": (0, -far, far, 0.5)
-        }.items():
-            rgb = " ".join(str(v) for v in _HORIZON[name])
-            assets.append(
-                f'<texture name="sky{name}" type="2d" builtin="gradient" width="64" height="64" '
-                f'rgb1="0.95 0.97 1.0" rgb2="{rgb}"/>'
-            )
-            assets.append(f'<material name="sky{name}" texture="sky{name}" texrepeat="1 1"/>')
-            geoms.append(
-                f'<geom name="horizon{name}" type="box" pos="{x} {y} 20" size="{hx} {hy} 20" '
-                f'material="sky{name}" contype="0" conaffinity="0" group="2"/>'
-            )
+        assets, scenery = self._scenery_xml(far)
+        obstacle_assets, obstacles = self._obstacles_xml()
+        join = "\n      ".join
         return f"""<mujoco model="appearance_nav_city_{self.seed}">
   <compiler angle="radian" autolimits="true"/>
   <option timestep="{timestep}" integrator="implicitfast"/>
@@ -274,19 +222,123 @@ class City:
     <headlight ambient="0.45 0.45 0.45" diffuse="0.35 0.35 0.35" specular="0 0 0"/>
   </visual>
   <asset>
-    {chr(10).join('    ' + a for a in assets).strip()}
-    {robot_assets}
+      {join(assets + obstacle_assets)}
+      {robot_assets}
   </asset>
   <worldbody>
     <light name="sun" directional="true" castshadow="false" pos="0 0 10" dir="0.3 0.4 -1" diffuse="0.5 0.5 0.5"/>
-    {chr(10).join('    ' + g for g in geoms).strip()}
+      {join(scenery)}
+    <body name="city">
+      {join(obstacles)}
+    </body>
     {robot_xml}
   </worldbody>
   <actuator>
     {actuators}
   </actuator>
+  <sensor>
+    {sensors}
+  </sensor>
 </mujoco>
 """
+
+    def floor_half(self) -> float:
+        """Half side of the floor plane, whose texture :meth:`ground_image` paints."""
+        return self.half + 14.0
+
+    def ground_image(self, pixels: int = 1024, extent: float | None = None) -> NDArray[np.uint8]:
+        """Paint the ground seen from above, (pixels, pixels, 3) uint8, row 0 = north.
+
+        Covers ``[-extent, extent]^2`` (default the floor plane): asphalt streets with
+        dashed centre lines and zebra crossings at the intersections, pavement blocks
+        with a per-block tint, and grass outside the city.
+        """
+        e = self.floor_half() if extent is None else extent
+        ticks = -e + (np.arange(pixels) + 0.5) * (2 * e / pixels)
+        x, y = np.meshgrid(ticks, ticks[::-1])
+        img = np.empty((pixels, pixels, 3))
+        img[:] = (0.33, 0.40, 0.28)  # grass
+        inside = (np.abs(x) <= self.half) & (np.abs(y) <= self.half)
+        tint = np.random.default_rng([self.seed, 1]).uniform(0.6, 0.78, (len(self.street_centers) + 1,) * 2 + (3,))
+        bx, by = np.searchsorted(self.street_centers, x), np.searchsorted(self.street_centers, y)
+        img[inside] = tint[by[inside], bx[inside]]  # pavement, one tint per block
+        hw = 0.5 * self.street_width
+        dx = np.abs(x[..., None] - self.street_centers).min(-1)  # to the nearest N-S street centre
+        dy = np.abs(y[..., None] - self.street_centers).min(-1)
+        street = inside & ((dx <= hw) | (dy <= hw))
+        img[street] = (0.22, 0.22, 0.24)
+        cross = (dx <= hw) & (dy <= hw)
+        dash = lambda t: np.mod(t, 1.0) < 0.5  # noqa: E731
+        img[inside & ~cross & (((dx < 0.05) & dash(y)) | ((dy < 0.05) & dash(x)))] = (0.9, 0.88, 0.6)
+        zebra = inside & ~cross & (((dx <= hw) & (dy <= hw + 0.6) & dash(4 * x))
+                                   | ((dy <= hw) & (dx <= hw + 0.6) & dash(4 * y)))
+        img[zebra] = (0.92, 0.92, 0.92)
+        return (img * 255).astype(np.uint8)
+
+    def paint_textures(self, model: "mujoco.MjModel") -> None:  # noqa: F821
+        """Write :meth:`ground_image` into the compiled model's floor texture (before any renderer exists)."""
+        import mujoco
+
+        tid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXTURE, "ground")
+        a, h, w, c = model.tex_adr[tid], model.tex_height[tid], model.tex_width[tid], model.tex_nchannel[tid]
+        model.tex_data[a : a + h * w * c] = self.ground_image(h)[..., :c].reshape(-1)
+
+    def _obstacles_xml(self) -> tuple[list[str], list[str]]:
+        """Assets and geoms of the collidable buildings and invisible boundary walls."""
+        h, assets, geoms = self.half, [], []
+        for i, b in enumerate(self.buildings):
+            assets.append(
+                f'<texture name="tex{i}" type="2d" builtin="checker" width="32" height="32" '
+                f'rgb1="{_fmt(b.rgb)}" rgb2="{_fmt(b.window_rgb)}"/>'
+            )
+            assets.append(f'<material name="mat{i}" texture="tex{i}" texrepeat="2 2.5" texuniform="true"/>')
+            geoms.append(
+                f'<geom name="building{i}" type="box" pos="{_fmt(b.center)}" size="{_fmt(b.half_size)}" '
+                f'material="mat{i}" contype="2" conaffinity="2" group="2"/>'
+            )
+        for name, (x, y, hx, hy) in {  # invisible walls keep the robot in the city
+            "E": (h + 0.25, 0, 0.25, h + 0.5), "W": (-h - 0.25, 0, 0.25, h + 0.5),
+            "N": (0, h + 0.25, h + 0.5, 0.25), "S": (0, -h - 0.25, h + 0.5, 0.25),
+        }.items():
+            geoms.append(
+                f'<geom name="wall{name}" type="box" pos="{x} {y} 0.5" size="{hx} {hy} 0.5" '
+                'rgba="1 1 1 0" contype="2" conaffinity="2" group="3"/>'
+            )
+        return assets, geoms
+
+    def _scenery_xml(self, far: float) -> tuple[list[str], list[str]]:
+        """Assets and visual-only geoms: floor (painted by :meth:`paint_textures`), skyline, horizon."""
+        f = far + 2.0
+        assets = [
+            f'<texture name="ground" type="2d" builtin="flat" width="{GROUND_PIXELS}" height="{GROUND_PIXELS}" '
+            'rgb1="0.3 0.3 0.3"/>',
+            '<material name="ground" texture="ground" texrepeat="1 1"/>',
+        ]
+        # a plane's third size is its rendering grid spacing: one big cell draws fastest
+        geoms = [f'<geom name="floor" type="plane" size="{f:.3f} {f:.3f} {f:.3f}" material="ground" '
+                 'contype="1" conaffinity="1" group="0"/>']
+        for i, b in enumerate(self.skyline):
+            geoms.append(
+                f'<geom name="skyline{i}" type="box" pos="{_fmt(b.center)}" size="{_fmt(b.half_size)}" '
+                f'rgba="{_fmt(b.rgb)} 1" contype="0" conaffinity="0" group="2"/>'
+            )
+        for name, (x, y, hx, hy) in {
+            "E": (far, 0, 0.5, far), "W": (-far, 0, 0.5, far), "N": (0, far, far, 0.5), "S": (0, -far, far, 0.5)
+        }.items():
+            assets.append(
+                f'<texture name="sky{name}" type="2d" builtin="gradient" width="64" height="64" '
+                f'rgb1="0.95 0.97 1.0" rgb2="{_fmt(_HORIZON[name])}"/>'
+            )
+            assets.append(f'<material name="sky{name}" texture="sky{name}" texrepeat="1 1"/>')
+            geoms.append(
+                f'<geom name="horizon{name}" type="box" pos="{x} {y} 20" size="{hx} {hy} 20" '
+                f'material="sky{name}" contype="0" conaffinity="0" group="2"/>'
+            )
+        return assets, geoms
+
+
+def _fmt(values: tuple[float, ...]) -> str:
+    return " ".join(f"{v:.3f}" for v in values)
 
 
 def _street_centers(size: float, block_size: float, street_width: float) -> NDArray[np.float64]:
@@ -382,7 +434,7 @@ def generate_city(
                 buildings=buildings, seed=int(seed), skyline=skyline)
 
 
-def _skyline(rng: np.random.Generator, half: float, per_side: int = 6) -> list[Building]:
+def _skyline(rng: np.random.Generator, half: float, per_side: int = 5) -> list[Building]:
     """Visual-only towers 2-9 m outside each side of the city, of random size and colour."""
     out = []
     for side in range(4):
