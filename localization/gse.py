@@ -14,7 +14,7 @@ import warnings
 
 import numpy as np
 from scipy import linalg, sparse
-from scipy.sparse.linalg import cg, splu
+from scipy.sparse.linalg import cg, lobpcg, splu
 from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
@@ -38,32 +38,71 @@ def grassmann_kernel(S: Array, kind: str = "binet_cauchy") -> Array:
 
 
 def smallest_generalized_eigs(M: sparse.spmatrix, d: Array, nev: int, seed: int = 0,
-                              dense_max: int = 1500, tol: float = 1e-8, maxiter: int = 200
+                              dense_max: int = 1500, lu_max: int = 6000,
+                              X0: Array | None = None, tol: float = 1e-7, maxiter: int = 100
                               ) -> tuple[Array, Array]:
     """Smallest ``nev`` eigenpairs of ``M v = lambda diag(d) v`` (M sparse PSD, d > 0).
 
-    Dense ``eigh`` when ``M`` is at most ``dense_max`` square, otherwise block
-    shift-invert subspace iteration with Rayleigh-Ritz (handles exactly
-    degenerate eigenvalues, seeded start block, one sparse LU factorisation).
+    Size N <= ``dense_max``: dense ``eigh``. N <= ``lu_max``: block shift-invert
+    subspace iteration with Rayleigh-Ritz (one sparse LU; handles exactly
+    degenerate eigenvalues). Larger: LOBPCG on ``D^-1/2 (D - M) D^-1/2`` (largest),
+    started from ``X0`` (N, <=nev) if given, completed by seeded random columns.
     Returns eigenvalues (nev,) and D-orthonormal eigenvectors (N, nev).
     """
     N = M.shape[0]
+    rng = np.random.default_rng(seed)
     if N <= dense_max:
         return linalg.eigh(M.toarray(), np.diag(d), subset_by_index=[0, nev - 1])
-    D = sparse.diags(d)
-    shift = 1e-5
-    lu = splu(sparse.csc_matrix(M + shift * D), permc_spec="MMD_AT_PLUS_A")
-    X = np.random.default_rng(seed).standard_normal((N, nev + 4))
-    for _ in range(maxiter):
-        X = lu.solve(d[:, None] * X)
-        MX = M @ X
-        lam, C = linalg.eigh(X.T @ MX, X.T @ (d[:, None] * X))
-        X, MX = X @ C, MX @ C
-        R = MX[:, :nev] - d[:, None] * X[:, :nev] * lam[:nev]
-        res = np.linalg.norm(R, axis=0) / np.linalg.norm(d[:, None] * X[:, :nev], axis=0)
-        if res.max() < tol:
-            break
-    return lam[:nev], X[:, :nev]
+    if N <= lu_max:
+        lu = splu(sparse.csc_matrix(M + 1e-5 * sparse.diags(d)), permc_spec="MMD_AT_PLUS_A")
+        X = rng.standard_normal((N, nev + 4))
+        for _ in range(maxiter):
+            X = np.column_stack([lu.solve(c) for c in (d[:, None] * X).T])
+            MX = M @ X
+            lam, C = linalg.eigh(X.T @ MX, X.T @ (d[:, None] * X))
+            X, MX = X @ C, MX @ C
+            R = MX[:, :nev] - d[:, None] * X[:, :nev] * lam[:nev]
+            res = np.linalg.norm(R, axis=0) / np.linalg.norm(d[:, None] * X[:, :nev], axis=0)
+            if res.max() < tol:
+                break
+        return lam[:nev], X[:, :nev]
+    isq = 1.0 / np.sqrt(d)
+    Nop = (sparse.diags(isq) @ (sparse.diags(d) - M) @ sparse.diags(isq)).tocsr()
+    X = rng.standard_normal((N, nev + 2))
+    if X0 is not None:
+        X[:, :X0.shape[1]] = X0 * np.sqrt(d)[:, None]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "did not reach tolerance": checked below
+        mu, X = lobpcg(Nop, X, largest=True, tol=1e-6, maxiter=maxiter)
+    order = np.argsort(-mu)[:nev]
+    return 1.0 - mu[order], X[:, order] * isq[:, None]
+
+
+def landmark_frames(Z: Array, Q: Array, n_landmarks: int, n_neighbors: int, kernel: str,
+                    seed: int = 0) -> Array | None:
+    """Coarse frame field for a warm start: align the frames of a random subsample
+    (with the full-sample tangents) and extend them to every point by
+    ``H_i = Q_i polar(Q_i^T sum_l K_il H_l)``. None if the subsample graph is
+    disconnected."""
+    n, p, q = Q.shape
+    lm = np.sort(np.random.default_rng(seed).permutation(n)[:n_landmarks])
+    dist, ind = knn_graph(Z[lm], n_neighbors)
+    sigma = 0.5 * float(np.median(dist[:, -1]))
+    ei, ej = symmetric_edges(ind)
+    try:
+        check_connected(len(lm), ei, ej, "landmarks")
+    except ValueError:
+        return None
+    S = _edge_products(Q[lm], ei, ej)
+    K = np.exp(-0.5 * ((Z[lm][ei] - Z[lm][ej]) ** 2).sum(axis=1) / sigma ** 2)
+    K = K * grassmann_kernel(S, kernel) + 1e-300
+    Hl, _, _ = align_frames(Q[lm], ei, ej, K, n_refine=2, seed=seed, S=S)
+    d2, nb = brute_knn(Z[lm], (Z[lm] ** 2).sum(axis=1), Z, n_neighbors)
+    with np.errstate(divide="ignore"):
+        logw = -0.5 * d2 / sigma ** 2 + np.log(grassmann_kernel(
+            np.einsum("npa,nkpb->nkab", Q, Q[lm][nb]), kernel))
+    w, _ = softmax_weights(logw)
+    return Q @ polar(np.einsum("npa,nk,nkpb->nab", Q, w, Hl[nb]))
 
 
 def _edge_products(Q: Array, ei: Array, ej: Array) -> Array:
@@ -76,7 +115,8 @@ def _edge_products(Q: Array, ei: Array, ej: Array) -> Array:
 
 
 def align_frames(Q: Array, ei: Array, ej: Array, K: Array, n_refine: int = 5, seed: int = 0,
-                 dense_max: int = 1500, S: Array | None = None) -> tuple[Array, Array, Array]:
+                 dense_max: int = 1500, S: Array | None = None, H0: Array | None = None,
+                 lu_max: int = 6000) -> tuple[Array, Array, Array]:
     """Polarised Stiefel alignment (spec 2.4(b)).
 
     Links ``O_ij = polar(Q_i^T Q_j)``, blocks ``A_ij = K_ij O_ij``; the smallest q
@@ -103,7 +143,8 @@ def align_frames(Q: Array, ei: Array, ej: Array, K: Array, n_refine: int = 5, se
     A = (A + A.T).tocsr()
     deg = np.bincount(ei, K, n) + np.bincount(ej, K, n)
     d = np.repeat(deg, q)
-    lam, V = smallest_generalized_eigs(sparse.diags(d) - A, d, q + 1, seed, dense_max)
+    X0 = None if H0 is None else (np.swapaxes(Q, 1, 2) @ H0).reshape(n * q, q)
+    lam, V = smallest_generalized_eigs(sparse.diags(d) - A, d, q + 1, seed, dense_max, lu_max, X0)
     v = V[:, :q].reshape(n, q, q)
     s = np.linalg.svd(v, compute_uv=False)
     condition = s[:, 0] / np.maximum(s[:, -1], np.finfo(float).tiny)
@@ -157,8 +198,10 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
         Drop links with Binet-Cauchy distance ``sqrt(1 - det^2)`` above this.
     n_refine : int, default=5
         Frame refinement sweeps after the eigen-alignment.
-    eigen_solver : {"auto", "dense", "sparse"}, default="auto"
-        "auto": dense only for n * q <= 1500.
+    eigen_solver : {"auto", "dense", "lu", "lobpcg"}, default="auto"
+        "auto": dense ``eigh`` for n * q <= 1500, sparse-LU shift-invert subspace
+        iteration for n * q <= 6000, else LOBPCG warm-started from the aligned
+        frames of a random subsample (landmarks).
     min_kernel_sum : float, default=1e-8
         Out-of-sample queries whose kernel sum is below this are out of domain.
     out_of_domain : {"raise", "nan"}, default="raise"
@@ -210,7 +253,7 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
                              f"choose one of {_KERNELS}")
         if self.out_of_domain not in ("raise", "nan"):
             raise ValueError(f"out_of_domain must be 'raise' or 'nan', got {self.out_of_domain!r}")
-        if self.eigen_solver not in ("auto", "dense", "sparse"):
+        if self.eigen_solver not in ("auto", "dense", "lu", "lobpcg"):
             raise ValueError(f"unknown eigen_solver {self.eigen_solver!r}")
 
     def fit(self, Z: Array, y: None = None, cut: Array | None = None
@@ -246,9 +289,14 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
         live = K > 1e-300
         ei, ej, K, S = ei[live], ej[live], K[live], S[live]
         self.n_components_graph_ = check_connected(n, ei, ej, f"{n} samples (k={k})")
-        dense_max = {"auto": 1500, "dense": 10 ** 9, "sparse": 0}[self.eigen_solver]
+        dense_max, lu_max = {"auto": (1500, 3000), "dense": (10 ** 9, 0), "lu": (0, 10 ** 9),
+                             "lobpcg": (0, 0)}[self.eigen_solver]
+        H0 = None
+        if n * q > max(dense_max, lu_max):
+            H0 = landmark_frames(Z, Q, min(n // 2, 3000 // q), k, self.grassmann_kernel,
+                                 self.random_state)
         H, lam, cond = align_frames(Q, ei, ej, K, self.n_refine, self.random_state,
-                                   dense_max, S)
+                                    dense_max, S, H0, lu_max)
         if lam[q] < 3.0 * lam[q - 1]:
             warnings.warn(f"weak alignment eigen-gap: lambda_(q+1)={lam[q]:.3g} < 3 x lambda_q="
                           f"{lam[q - 1]:.3g}; the frames may mix (disconnected or folded sample?)",
