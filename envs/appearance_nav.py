@@ -47,7 +47,7 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
     city_size, block_size, street_width : float
         City layout in metres (default 20 x 20 m, 4 m blocks, 2 m streets).
     frame_skip : int
-        Physics steps (0.005 s each) per env step; ``dt = 0.005 * frame_skip`` (default 0.1 s).
+        Physics steps (0.01 s each) per env step; ``dt = 0.01 * frame_skip`` (default 0.1 s).
 
     Notes
     -----
@@ -82,7 +82,7 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         city_size: float = 20.0,
         block_size: float = 4.0,
         street_width: float = 2.0,
-        frame_skip: int = 20,
+        frame_skip: int = 10,
     ) -> None:
         self.image_size = check_image_size(image_size)
         if not (np.isfinite(motion_noise) and motion_noise >= 0):

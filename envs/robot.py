@@ -34,12 +34,12 @@ ROBOT_XML = f"""
       <camera name="ego" pos="0.1 0 {CAMERA_HEIGHT - WHEEL_RADIUS}" xyaxes="0 -1 0 0 0 1" fovy="{CAMERA_FOVY}"/>
       <body name="wheel_left" pos="0 {HALF_TRACK} 0">
         <joint name="left" type="hinge" axis="0 1 0" armature="0.001" damping="0.001"/>
-        <geom name="wheel_left" type="sphere" size="{WHEEL_RADIUS}" mass="0.2"
+        <geom name="wheel_left" type="sphere" size="{WHEEL_RADIUS}" mass="0.5"
               friction="1.2 0.01 0.001" rgba="0.1 0.1 0.1 1" contype="3" conaffinity="3" group="3"/>
       </body>
       <body name="wheel_right" pos="0 {-HALF_TRACK} 0">
         <joint name="right" type="hinge" axis="0 1 0" armature="0.001" damping="0.001"/>
-        <geom name="wheel_right" type="sphere" size="{WHEEL_RADIUS}" mass="0.2"
+        <geom name="wheel_right" type="sphere" size="{WHEEL_RADIUS}" mass="0.5"
               friction="1.2 0.01 0.001" rgba="0.1 0.1 0.1 1" contype="3" conaffinity="3" group="3"/>
       </body>
     </body>
