@@ -7,6 +7,7 @@ observation.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import gymnasium as gym
@@ -168,7 +169,7 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         self._sync_kinematics()
         self._steps += 1
         pose = self.pose
-        distance = float(np.hypot(pose[0] - self._goal[0], pose[1] - self._goal[1]))
+        distance = math.hypot(pose[0] - self._goal[0], pose[1] - self._goal[1])
         reward = (self._distance - distance) - self.STEP_COST - self.COLLISION_PENALTY * collision
         self._distance = distance
         terminated = distance < self.GOAL_RADIUS
@@ -193,10 +194,10 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
     @property
     def pose(self) -> NDArray[np.float64]:
         """The true pose ``[x, y, yaw]`` of the robot's free joint, float64 (3,)."""
-        q = self.data.qpos[self._root_qpos : self._root_qpos + 7]
-        qw, qx, qy, qz = q[3:7]  # heading of the body x axis projected on the ground
-        yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-        return np.array([q[0], q[1], float(wrap_angle(yaw))])
+        x, y, _, qw, qx, qy, qz = self.data.qpos[self._root_qpos : self._root_qpos + 7].tolist()
+        # heading of the body x axis projected on the ground; atan2 is already in [-pi, pi]
+        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        return np.array([x, y, math.pi if yaw == -math.pi else yaw])
 
     @property
     def goal(self) -> NDArray[np.float64]:
@@ -232,16 +233,17 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         return {
             "pose": pose,
             "collision": bool(collision),
-            "distance_to_goal": float(np.hypot(pose[0] - self._goal[0], pose[1] - self._goal[1])),
+            "distance_to_goal": math.hypot(pose[0] - self._goal[0], pose[1] - self._goal[1]),
             "control": np.asarray(control, dtype=np.float64),
         }
 
     def _distance_to_goal(self) -> float:
-        return float(np.hypot(*(self.pose[:2] - self._goal)))
+        x, y, _ = self.pose
+        return math.hypot(x - self._goal[0], y - self._goal[1])
 
     def _wheel_speeds(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
-        v, w = u
-        q = np.array([v - w * HALF_TRACK, v + w * HALF_TRACK]) / WHEEL_RADIUS  # left, right (rad/s)
+        v, w = u.tolist()
+        q = np.array([(v - w * HALF_TRACK) / WHEEL_RADIUS, (v + w * HALF_TRACK) / WHEEL_RADIUS])  # left, right
         if self.motion_noise > 0:
             e = self.np_random.standard_normal(4)
             q = q * (1.0 + self.motion_noise * e[:2]) + self.motion_noise * self.ADDITIVE_WHEEL_NOISE * e[2:]
@@ -254,9 +256,10 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
             raise ValueError(f"action must be numeric with shape (2,) [v, w], got {action!r}") from None
         if u.shape != (2,):
             raise ValueError(f"action must have shape (2,) [v, w], got shape {u.shape}")
-        if not np.all(np.isfinite(u)):
+        v, w = u.tolist()
+        if not (math.isfinite(v) and math.isfinite(w)):
             raise ValueError(f"action must be finite, got NaN or inf in {u}")
-        return np.clip(u, [-self.V_MAX, -self.W_MAX], [self.V_MAX, self.W_MAX])
+        return np.array([min(max(v, -self.V_MAX), self.V_MAX), min(max(w, -self.W_MAX), self.W_MAX)])
 
     def _check_point(self, value: ArrayLike, dim: int, what: str, margin: float) -> NDArray[np.float64]:
         p = np.asarray(value, dtype=np.float64)

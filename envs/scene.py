@@ -123,7 +123,7 @@ class City:
         cached = getattr(self, "_fp_cache", None)
         if cached is None or len(cached) != len(self.buildings):
             cached = self.footprints()
-            object.__setattr__(self, "_fp_cache", cached)
+            self._fp_cache = cached
         return cached
 
     def random_free_pose(self, rng: np.random.Generator, margin: float = 0.3) -> NDArray[np.float64]:
@@ -256,24 +256,22 @@ class City:
         """
         e = self.floor_half() if extent is None else extent
         ticks = -e + (np.arange(pixels) + 0.5) * (2 * e / pixels)
-        x, y = np.meshgrid(ticks, ticks[::-1])
-        img = np.empty((pixels, pixels, 3))
-        img[:] = (0.33, 0.40, 0.28)  # grass
+        # everything is separable: 1-D masks along x (columns) and y (rows), broadcast
+        x, y = ticks[None, :], ticks[::-1, None]
+        hw, c = 0.5 * self.street_width, self.street_centers
+        dx = np.abs(x[..., None] - c).min(-1)  # distance to the nearest N-S street centre line
+        dy = np.abs(y[..., None] - c).min(-1)
         inside = (np.abs(x) <= self.half) & (np.abs(y) <= self.half)
-        tint = np.random.default_rng([self.seed, 1]).uniform(0.6, 0.78, (len(self.street_centers) + 1,) * 2 + (3,))
-        bx, by = np.searchsorted(self.street_centers, x), np.searchsorted(self.street_centers, y)
-        img[inside] = tint[by[inside], bx[inside]]  # pavement, one tint per block
-        hw = 0.5 * self.street_width
-        dx = np.abs(x[..., None] - self.street_centers).min(-1)  # to the nearest N-S street centre
-        dy = np.abs(y[..., None] - self.street_centers).min(-1)
-        street = inside & ((dx <= hw) | (dy <= hw))
-        img[street] = (0.22, 0.22, 0.24)
         cross = (dx <= hw) & (dy <= hw)
-        dash = lambda t: np.mod(t, 1.0) < 0.5  # noqa: E731
-        img[inside & ~cross & (((dx < 0.05) & dash(y)) | ((dy < 0.05) & dash(x)))] = (0.9, 0.88, 0.6)
-        zebra = inside & ~cross & (((dx <= hw) & (dy <= hw + 0.6) & dash(4 * x))
-                                   | ((dy <= hw) & (dx <= hw + 0.6) & dash(4 * y)))
-        img[zebra] = (0.92, 0.92, 0.92)
+        dash_x, dash_y = np.mod(x, 1.0) < 0.5, np.mod(y, 1.0) < 0.5
+        zebra_x, zebra_y = np.mod(4 * x, 1.0) < 0.5, np.mod(4 * y, 1.0) < 0.5
+        tint = np.random.default_rng([self.seed, 1]).uniform(0.6, 0.78, (len(c) + 1, len(c) + 1, 3))
+        img = tint[np.searchsorted(c, y[:, 0])][:, np.searchsorted(c, x[0])]  # pavement, one tint per block
+        img[~inside] = (0.33, 0.40, 0.28)  # grass
+        img[inside & ((dx <= hw) | (dy <= hw))] = (0.22, 0.22, 0.24)  # asphalt
+        img[inside & ~cross & (((dx < 0.05) & dash_y) | ((dy < 0.05) & dash_x))] = (0.9, 0.88, 0.6)
+        img[inside & ~cross & (((dx <= hw) & (dy <= hw + 0.6) & zebra_x)
+                               | ((dy <= hw) & (dx <= hw + 0.6) & zebra_y))] = (0.92, 0.92, 0.92)
         return (img * 255).astype(np.uint8)
 
     def paint_textures(self, model: "mujoco.MjModel") -> None:  # noqa: F821
