@@ -4,7 +4,7 @@ Encoder: four 3x3 stride-2 conv + batch-norm + ReLU layers (64 -> 32 -> 16 -> 8 
 a linear map of the flattened 4 x 4 map to an ``embedding_dim`` vector. Flattening, rather than
 global pooling, keeps *where* things are in the image, which is what a pose regressor needs.
 
-Self-supervised objectives (:func:`train_small_cnn`), both with photometric augmentation
+Self-supervised objectives (:func:`train_small_cnn`), all with photometric augmentation
 (brightness, contrast, per-channel gain) so that features ignore lighting:
 
 - ``"autoencoder"`` (default): a denoising autoencoder; the decoder reconstructs the clean image
@@ -12,6 +12,9 @@ Self-supervised objectives (:func:`train_small_cnn`), both with photometric augm
   and is smooth in the input, so nearby poses give nearby features.
 - ``"contrastive"``: SimCLR-style NT-Xent between two augmented views of an image, whose
   augmentations also include random shifts of up to ``max_shift`` pixels.
+- ``"pose_contrastive"``: NT-Xent where the positive of an image is one of its
+  ``n_neighbors`` nearest images *in pose* within the same city (``poses``, ``groups``); with
+  route data these are the neighbouring frames. Needs poses of the training cities only.
 
 Train it on images of *other* cities (``scripts/train_small_cnn.py``, never the evaluation city)
 and pass the saved file as ``SmallCNNFeatures(weights=path)``.
@@ -26,6 +29,7 @@ from typing import Any
 import numpy as np
 import torch
 import torch.nn.functional as F
+from scipy.spatial import KDTree
 from torch import nn
 
 from localization.features import (
@@ -40,7 +44,7 @@ from localization.features import (
 
 __all__ = ["SmallCNN", "SmallCNNFeatures", "load_small_cnn", "save_small_cnn", "train_small_cnn"]
 
-OBJECTIVES = ("autoencoder", "contrastive")
+OBJECTIVES = ("autoencoder", "contrastive", "pose_contrastive")
 
 
 def _conv(cin: int, cout: int) -> nn.Sequential:
@@ -64,7 +68,7 @@ class SmallCNN(nn.Module):
         Channels of the first conv layer (then 2w, 4w, 2w).
     input_size : int
         Square input side; images are resized to it. Must be divisible by 16.
-    objective : {"autoencoder", "contrastive"}
+    objective : {"autoencoder", "contrastive", "pose_contrastive"}
         Which training head to build.
     """
 
@@ -149,20 +153,53 @@ def nt_xent(z1: torch.Tensor, z2: torch.Tensor, temperature: float) -> torch.Ten
     return F.cross_entropy(sim, target)
 
 
+def pose_neighbors(poses: np.ndarray, groups: np.ndarray | None, k: int,
+                   yaw_scale: float = 2.0) -> np.ndarray:
+    """Indices (n, k) of each pose's k nearest other poses of the same group.
+
+    Distance: Euclidean on ``[x, y, yaw_scale * cos(yaw), yaw_scale * sin(yaw)]`` (metres; a
+    heading change of 1 rad counts about ``yaw_scale`` m).
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    if poses.ndim != 2 or poses.shape[1] != 3 or not np.all(np.isfinite(poses)):
+        raise ValueError(f"poses must be finite (n, 3) [x, y, yaw], got shape {poses.shape}")
+    groups = np.zeros(len(poses), int) if groups is None else np.asarray(groups)
+    if groups.shape != (len(poses),):
+        raise ValueError(f"groups must have shape ({len(poses)},), got {groups.shape}")
+    emb = np.c_[poses[:, :2], yaw_scale * np.cos(poses[:, 2]), yaw_scale * np.sin(poses[:, 2])]
+    out = np.empty((len(poses), k), dtype=np.int64)
+    for g in np.unique(groups):
+        idx = np.flatnonzero(groups == g)
+        if len(idx) <= k:
+            raise ValueError(f"group {g} has {len(idx)} images; need more than n_neighbors={k}")
+        _, nb = KDTree(emb[idx]).query(emb[idx], k=k + 1)
+        out[idx] = idx[nb[:, 1:]]  # column 0 is the point itself
+    return out
+
+
 def train_small_cnn(images: np.ndarray, epochs: int = 20, seed: int = 0, *,
                     objective: str = "autoencoder", embedding_dim: int = 128, width: int = 32,
                     input_size: int = 64, batch_size: int = 128, lr: float = 1e-3,
                     max_shift: int = 2, temperature: float = 0.2,
-                    num_threads: int | None = None, progress: bool = True) -> SmallCNN:
+                    poses: np.ndarray | None = None, groups: np.ndarray | None = None,
+                    n_neighbors: int = 4, num_threads: int | None = None,
+                    progress: bool = True) -> SmallCNN:
     """Train a :class:`SmallCNN` self-supervised on uint8 images (n, H, W, 3).
 
-    Deterministic for a given ``seed`` (weights init, shuffling and augmentation all draw from
-    seeded generators). Adam with a cosine learning-rate schedule. The per-epoch mean loss is in
+    ``poses`` (n, 3) and ``groups`` (n,) (e.g. the city seed of each image) are used by
+    ``objective="pose_contrastive"`` only (see :func:`pose_neighbors`). Deterministic for a
+    given ``seed`` (weights init, shuffling and augmentation all draw from seeded generators).
+    Adam with a cosine learning-rate schedule. The per-epoch mean loss is in
     ``model.loss_history``. Returns the model in eval mode.
     """
     images = check_images(images)
     if len(images) < 2:
         raise ValueError(f"need at least 2 images to train, got {len(images)}")
+    nbrs = None
+    if objective == "pose_contrastive":
+        if poses is None or len(poses) != len(images):
+            raise ValueError("objective 'pose_contrastive' needs poses (n, 3) for the n images")
+        nbrs = torch.from_numpy(pose_neighbors(poses, groups, n_neighbors))
     torch.manual_seed(seed)
     gen = torch.Generator().manual_seed(seed)
     model = SmallCNN(embedding_dim, width, input_size, objective)
@@ -184,6 +221,11 @@ def train_small_cnn(images: np.ndarray, epochs: int = 20, seed: int = 0, *,
                 x = to_input(data[idx], input_size)
                 if objective == "autoencoder":
                     loss = F.mse_loss(model(augment(x, gen)), x)
+                elif nbrs is not None:
+                    pos = nbrs[idx, torch.randint(0, nbrs.shape[1], (len(idx),), generator=gen)]
+                    xp = to_input(data[pos], input_size)
+                    loss = nt_xent(model(augment(x, gen, max_shift)),
+                                   model(augment(xp, gen, max_shift)), temperature)
                 else:
                     loss = nt_xent(model(augment(x, gen, max_shift)),
                                    model(augment(x, gen, max_shift)), temperature)

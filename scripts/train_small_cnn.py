@@ -40,7 +40,9 @@ class Args:
     camera: str = field(default="perspective", metadata={"help": "env camera"})
     image_size: int = field(default=64, metadata={"help": "rendered image side (pixels)"})
     objective: str = field(default="autoencoder", metadata={
-        "help": "self-supervised objective: autoencoder or contrastive"})
+        "help": "self-supervised objective: autoencoder, contrastive or pose_contrastive "
+                "(positives = pose-nearest images of the same city, e.g. neighbouring route "
+                "frames)"})
     embedding_dim: int = field(default=128, metadata={"help": "CNN embedding dimension"})
     width: int = field(default=32, metadata={"help": "channels of the first conv layer"})
     epochs: int = field(default=30, metadata={"help": "training epochs"})
@@ -80,12 +82,14 @@ def parse_seeds(text: str) -> list[int]:
     return seeds
 
 
-def synthetic_images(n: int, size: int, seed: int) -> np.ndarray:
-    """Crops of smooth random colour panoramas: (n, size, size, 3) uint8."""
+def synthetic_images(n: int, size: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Crops of smooth random colour panoramas (n, size, size, 3) uint8, and fake poses (n, 3)
+    (x = crop offset / 10, one panorama per "city" of 50 images)."""
     rng = np.random.default_rng(seed)
     width = 4 * size
     xs = np.arange(width)[:, None] / width
     out = np.empty((n, size, size, 3), dtype=np.uint8)
+    poses = np.zeros((n, 3))
     for k in range(0, n, 50):
         freqs = rng.integers(1, 8, size=(6, 1))
         phase = rng.uniform(0, 2 * np.pi, size=(6, 3))
@@ -95,27 +99,30 @@ def synthetic_images(n: int, size: int, seed: int) -> np.ndarray:
         for j in range(k, min(k + 50, n)):
             x0 = rng.integers(0, width - size)
             out[j] = (255 * img[:, x0:x0 + size]).astype(np.uint8)
-    return out
+            poses[j] = (x0 / 10, k, 0.0)
+    return out, poses
 
 
-def collect(args: Args, seeds: list[int]) -> np.ndarray:
-    """Images from ``gymnasium.make("AppearanceNav-v0", scene_seed=s)`` for every seed."""
+def collect(args: Args, seeds: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Images, poses and city seeds from ``gymnasium.make("AppearanceNav-v0", scene_seed=s)``."""
     import gymnasium as gym
 
     import envs
 
-    batches = []
+    batches, all_poses, groups = [], [], []
     for i, s in enumerate(seeds):
         env = gym.make("AppearanceNav-v0", scene_seed=s, camera=args.camera,
                        image_size=(args.image_size, args.image_size))
         try:
-            images, _ = envs.collect_dataset(env, args.images_per_city, args.mode,
-                                             args.seed * 100_003 + s)
+            images, poses = envs.collect_dataset(env, args.images_per_city, args.mode,
+                                                 args.seed * 100_003 + s)
         finally:
             env.close()
         batches.append(np.asarray(images, dtype=np.uint8))
+        all_poses.append(np.asarray(poses, dtype=np.float64))
+        groups.append(np.full(len(images), s))
         print(f"city {s}: {len(images)} images ({i + 1}/{len(seeds)})", flush=True)
-    return np.concatenate(batches)
+    return np.concatenate(batches), np.concatenate(all_poses), np.concatenate(groups)
 
 
 def main(argv: list[str] | None = None) -> Path:
@@ -125,14 +132,16 @@ def main(argv: list[str] | None = None) -> Path:
         raise SystemExit(f"eval city {args.eval_seed} is among the training cities {seeds}")
     t0 = time.perf_counter()
     if args.synthetic:
-        images = synthetic_images(args.images_per_city * len(seeds), args.image_size, args.seed)
+        images, poses = synthetic_images(args.images_per_city * len(seeds), args.image_size,
+                                         args.seed)
+        groups = poses[:, 1].astype(int)
     else:
-        images = collect(args, seeds)
+        images, poses, groups = collect(args, seeds)
     t_collect = time.perf_counter() - t0
     model = train_small_cnn(images, args.epochs, args.seed, objective=args.objective,
                             embedding_dim=args.embedding_dim, width=args.width,
                             input_size=args.image_size, batch_size=args.batch_size, lr=args.lr,
-                            num_threads=args.num_threads)
+                            poses=poses, groups=groups, num_threads=args.num_threads)
     t_train = time.perf_counter() - t0 - t_collect
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -21,6 +21,7 @@ from localization.features import (
 from localization.small_cnn import (
     SmallCNNFeatures,
     load_small_cnn,
+    pose_neighbors,
     save_small_cnn,
     train_small_cnn,
 )
@@ -210,3 +211,29 @@ def test_small_cnn_fit_trains_without_weights(images):
                            batch_size=16, progress=False).fit(images)
     assert len(ext.model_.loss_history) == 1
     assert ext.transform(images[:3]).shape == (3, 16)
+
+
+def test_pose_neighbors_stay_in_group_and_are_nearest():
+    x = np.arange(10.0)
+    poses = np.c_[np.r_[x, x], np.zeros(20), np.zeros(20)]
+    groups = np.repeat([0, 1], 10)
+    nb = pose_neighbors(poses, groups, k=2)
+    assert nb.shape == (20, 2)
+    assert np.all(groups[nb] == groups[:, None]) and np.all(nb != np.arange(20)[:, None])
+    assert set(nb[5]) == {4, 6} and set(nb[15]) == {14, 16} and set(nb[0]) == {1, 2}
+    turned = poses.copy()
+    turned[1, 2] = np.pi  # same place, opposite heading: no longer a near neighbour of 0
+    assert 1 not in pose_neighbors(turned, groups, k=2)[0]
+    with pytest.raises(ValueError, match="need more than n_neighbors"):
+        pose_neighbors(poses[:3], None, k=3)
+
+
+def test_pose_contrastive_training(images):
+    poses = np.c_[np.arange(len(images)) % 6, np.zeros(len(images)), np.zeros(len(images))]
+    groups = np.arange(len(images)) // 6  # one "city" per panorama, 6 views each
+    model = train_small_cnn(images, epochs=2, seed=0, batch_size=16, embedding_dim=16, width=8,
+                            objective="pose_contrastive", poses=poses, groups=groups,
+                            n_neighbors=2, progress=False)
+    assert len(model.loss_history) == 2 and np.all(np.isfinite(model.loss_history))
+    with pytest.raises(ValueError, match="needs poses"):
+        SmallCNNFeatures(objective="pose_contrastive", epochs=1, progress=False).fit(images)
