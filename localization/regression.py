@@ -94,7 +94,7 @@ class GSERegressor(BaseEstimator):
                  project_features: bool = False, ridge: float = 0.0,
                  bandwidth_grid: tuple[float, ...] = BANDWIDTH_GRID,
                  out_of_domain: str = "raise", random_state: int = 0,
-                 theta_scale_factor: float = 2.0) -> None:
+                 theta_scale_factor: float = 2.0, jr_neighbors: int | None = None) -> None:
         self.n_components = n_components
         self.n_neighbors = n_neighbors
         self.periodic = periodic
@@ -107,6 +107,7 @@ class GSERegressor(BaseEstimator):
         self.out_of_domain = out_of_domain
         self.random_state = random_state
         self.theta_scale_factor = theta_scale_factor
+        self.jr_neighbors = jr_neighbors
 
     # ----------------------------------------------------------------- geometry
     def _periodic(self, d: int) -> tuple[int, ...]:
@@ -160,16 +161,16 @@ class GSERegressor(BaseEstimator):
                 j += 1
         return E
 
-    def _auto_scale(self, Ws: Array, Theta: Array) -> Array:
-        """Per-column feature sensitivity: median over samples of |dw/dtheta_c| from local
-        least squares of standardised w on theta over pose-space neighbours."""
+    def _auto_scale(self, Ws: Array, Theta: Array, ind_w: Array) -> Array:
+        """Per-column feature sensitivity |dw/dtheta_c| (median over samples) from local
+        least squares of standardised w on theta over *feature-space* neighbours
+        ``ind_w`` (pose-space neighbours would let poses bridge separate feature clusters)."""
         d = Theta.shape[1]
         self.theta_scale_ = np.ones(d)
-        zv = self._lift(Theta)
-        _, ind = brute_knn(zv, (zv ** 2).sum(axis=1), zv, self.n_neighbors + 1)
-        dT = self._pose_diff(Theta, Theta[ind])
-        dW = Ws[:, None, :] - Ws[ind]
-        A = np.swapaxes(dT, 1, 2) @ dT + 1e-12 * np.eye(d)
+        dT = self._pose_diff(Theta, Theta[ind_w])
+        dW = Ws[:, None, :] - Ws[ind_w]
+        A = np.swapaxes(dT, 1, 2) @ dT
+        A += 1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] * np.eye(d)
         Jt = np.linalg.solve(A, np.swapaxes(dT, 1, 2) @ dW)  # (n, d, m) = J^T
         return np.median(np.linalg.norm(Jt, axis=2), axis=0)
 
@@ -198,7 +199,7 @@ class GSERegressor(BaseEstimator):
         if isinstance(self.theta_scale, str):
             if self.theta_scale != "auto":
                 raise ValueError(f"theta_scale must be 'auto' or numbers, got {self.theta_scale!r}")
-            self.theta_scale_ = self.theta_scale_factor * self._auto_scale(Ws, Theta)
+            self.theta_scale_ = self.theta_scale_factor * self._auto_scale(Ws, Theta, ind_w)
         else:
             self.theta_scale_ = np.broadcast_to(np.asarray(self.theta_scale, float), (d,)).copy()
         if not np.all(self.theta_scale_ > 0):
@@ -209,6 +210,7 @@ class GSERegressor(BaseEstimator):
             q, n_neighbors=k, bandwidth=self.bandwidth, grassmann_kernel=self.grassmann_kernel,
             out_of_domain=self.out_of_domain, random_state=self.random_state)
         self.gse_.fit(Z, cut=Theta[:, self._per[0]] if self._per else None)
+        self.gse_.select_recovery_bandwidth()
         H = self.gse_.frames_
         self.Gr_ = pinv_blocks(H[:, :m, :])
         if self.project_features:
@@ -223,12 +225,15 @@ class GSERegressor(BaseEstimator):
         self._setup()
         # leave-one-out bandwidths of the two Jacobian regressions
         y = self.embedding_
+        self.jr_neighbors_ = kj = min(self.jr_neighbors or k, n - 2)
+        d2, ind_w = brute_knn(Ws, self._ws_sqn, Ws, kj + 1)
+        ind_w, dist_w = ind_w[:, 1:], np.sqrt(d2[:, 1:])
         mask = same_side(self.theta_[ind_w][..., self._per[0]]) if self._per else None
         grid = np.asarray(self.bandwidth_grid)
         self.bandwidth_w_, _ = loo_bandwidth(
             Ws[:, None, :] - Ws[ind_w], y[ind_w], self.Gr_[ind_w], y,
             grid * np.median(dist_w[:, -1]), mask)
-        d2, ind_t = brute_knn(self._zv, self._zv_sqn, self._zv, k + 1)
+        d2, ind_t = brute_knn(self._zv, self._zv_sqn, self._zv, kj + 1)
         ind_t = ind_t[:, 1:]
         dX = self._pose_diff(Theta, Theta[ind_t])
         mask = same_side(self.theta_[ind_t][..., self._per[0]]) if self._per else None
@@ -247,9 +252,9 @@ class GSERegressor(BaseEstimator):
         self.embedding_ = self.gse_.embedding_
 
     # ----------------------------------------------------------------- predict
-    def _check(self, X: Array, name: str, n_cols: int) -> Array:
+    def _check(self, X: Array, name: str, n_cols: str) -> Array:
         check_is_fitted(self, "gse_")
-        return check_2d(X, name, n_cols)
+        return check_2d(X, name, len(getattr(self, n_cols)))
 
     def _flag(self, log_sum: Array, what: str, *outs: Array) -> None:
         bad = log_sum < np.log(self.gse_.min_kernel_sum)
@@ -263,9 +268,9 @@ class GSERegressor(BaseEstimator):
                     o[bad] = np.nan
 
     def _r_star(self, W: Array, jacobian: bool) -> tuple[Array, Array | None]:
-        W = self._check(W, "W", len(self.w_mean_))
+        W = self._check(W, "W", "w_mean_")
         Ws = (W - self.w_mean_) / self.w_scale_
-        _, ind = brute_knn(self._ws, self._ws_sqn, Ws, self.n_neighbors)
+        _, ind = brute_knn(self._ws, self._ws_sqn, Ws, self.jr_neighbors_)
         mask = same_side(self.theta_[ind][..., self._per[0]]) if self._per else None
         r, J, log_sum = gaussian_jr(Ws[:, None, :] - self._ws[ind], self.embedding_[ind],
                                     self.Gr_[ind], self.bandwidth_w_, mask, jacobian)
@@ -275,10 +280,10 @@ class GSERegressor(BaseEstimator):
         return r, J
 
     def _R_star(self, Theta: Array, jacobian: bool) -> tuple[Array, Array | None]:
-        Theta = self._check(Theta, "Theta", len(self.theta_scale_)).copy()
+        Theta = self._check(Theta, "Theta", "theta_scale_").copy()
         for c in self._per:
             Theta[:, c] = wrap_angle(Theta[:, c])
-        _, ind = brute_knn(self._zv, self._zv_sqn, self._lift(Theta), self.n_neighbors)
+        _, ind = brute_knn(self._zv, self._zv_sqn, self._lift(Theta), self.jr_neighbors_)
         mask = same_side(self.theta_[ind][..., self._per[0]]) if self._per else None
         R, J, log_sum = gaussian_jr(self._pose_diff(Theta, self.theta_[ind]), self.embedding_[ind],
                                     self.GR_[ind], self.bandwidth_theta_, mask, jacobian)
@@ -329,8 +334,9 @@ class GSERegressor(BaseEstimator):
         settings = dict(params={k: (list(v) if isinstance(v, tuple) else v)
                                 for k, v in self.get_params().items()},
                         gse_params=g.get_params(), w_scale_=self.w_scale_,
-                        bandwidth_w_=self.bandwidth_w_, bandwidth_theta_=self.bandwidth_theta_,
-                        gse_bandwidth_=g.bandwidth_, n_edges_=g.n_edges_, format=1)
+                        bandwidth_w_=self.bandwidth_w_, jr_neighbors_=self.jr_neighbors_, bandwidth_theta_=self.bandwidth_theta_,
+                        gse_bandwidth_=g.bandwidth_, recovery_bandwidth_=g.recovery_bandwidth_,
+                        n_edges_=g.n_edges_, format=1)
         if isinstance(settings["params"]["theta_scale"], np.ndarray):
             settings["params"]["theta_scale"] = settings["params"]["theta_scale"].tolist()
         arrays = {k: getattr(self, k) if hasattr(self, k) else getattr(g, k) for k in _ARRAYS}
@@ -354,8 +360,10 @@ class GSERegressor(BaseEstimator):
                         ("theta_", "Gr_", "GR_") else g, k, np.asarray(data[k], dtype=np.float64))
             g.cut_ = data["cut_"] if data["cut_"].size else None
             g.bandwidth_, g.n_edges_ = float(s["gse_bandwidth_"]), int(s["n_edges_"])
+            g.recovery_bandwidth_ = float(s["recovery_bandwidth_"])
             g.n_components_graph_ = 1
             self.w_scale_ = float(s["w_scale_"])
+            self.jr_neighbors_ = int(s["jr_neighbors_"])
             self.bandwidth_w_, self.bandwidth_theta_ = (float(s["bandwidth_w_"]),
                                                         float(s["bandwidth_theta_"]))
             n, p_, q = g.frames_.shape
