@@ -54,12 +54,16 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
     -----
     Action ``U = [v, w]``: commanded linear (m/s) and angular (rad/s) velocity in the Box
     ``[-1, 1]^2`` (float32). Finite out-of-range actions are clipped to the Box; NaN/inf or
-    a shape other than (2,) raise ``ValueError``. Observation ``{"image": (H, W, 3) uint8,
-    "goal": (2,) float32 world position}``. ``info``: ``pose`` [x, y, yaw] float64,
-    ``collision`` (robot touched a building or the city's invisible boundary wall during the step), ``distance_to_goal``,
-    ``control`` (the clipped U applied). Reward: decrease of the distance to the goal
-    minus ``STEP_COST`` minus ``COLLISION_PENALTY`` on collision; terminated within
-    ``GOAL_RADIUS`` of the goal.
+    a shape other than (2,) raise ``ValueError``. ``dt = 0.1`` s by default; the known motion
+    model is ``self.motion_model = UnicycleModel(dt)``.
+
+    Observation ``{"image": (H, W, 3) uint8, "goal": (2,) float32 world position}``.
+    ``info``: ``pose`` [x, y, yaw] float64 (the true pose, never in the observation),
+    ``collision`` (the robot touched a building or the city's invisible boundary wall
+    during the step), ``distance_to_goal`` (m), ``control`` (the clipped U applied).
+
+    Reward: decrease of the distance to the goal minus ``STEP_COST`` minus
+    ``COLLISION_PENALTY`` on collision; terminated within ``GOAL_RADIUS`` of the goal.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}

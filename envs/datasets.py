@@ -107,6 +107,9 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
     n_headings : int — headings per grid position ("grid" only).
     progress : bool — show a tqdm progress bar.
 
+    The env's state is changed (teleports, or a reset and a drive for "route"): reset it
+    before running episodes on it.
+
     Returns
     -------
     images : (n, H, W, 3) uint8
