@@ -7,10 +7,13 @@ here forms an n x n or nq x nq dense matrix.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 from numpy.typing import NDArray
-from scipy import sparse
+from scipy import linalg, sparse
 from scipy.sparse.csgraph import connected_components
+from scipy.sparse.linalg import lobpcg, splu
 from sklearn.neighbors import NearestNeighbors
 
 Array = NDArray[np.float64]
@@ -172,3 +175,44 @@ def softmax_weights(logw: Array) -> tuple[Array, Array]:
     e = np.exp(logw - mx)
     s = e.sum(axis=1, keepdims=True)
     return e / s, (mx + np.log(s))[:, 0]
+
+
+def smallest_generalized_eigs(M: sparse.spmatrix, d: Array, nev: int, seed: int = 0,
+                              dense_max: int = 1500, lu_max: int = 6000,
+                              X0: Array | None = None, tol: float = 1e-7, maxiter: int = 100
+                              ) -> tuple[Array, Array]:
+    """Smallest ``nev`` eigenpairs of ``M v = lambda diag(d) v`` (M sparse PSD, d > 0).
+
+    Size N <= ``dense_max``: dense ``eigh``. N <= ``lu_max``: block shift-invert
+    subspace iteration with Rayleigh-Ritz (one sparse LU; handles exactly
+    degenerate eigenvalues). Larger: LOBPCG on ``D^-1/2 (D - M) D^-1/2`` (largest),
+    started from ``X0`` (N, <=nev) if given, completed by seeded random columns.
+    Returns eigenvalues (nev,) and D-orthonormal eigenvectors (N, nev).
+    """
+    N = M.shape[0]
+    rng = np.random.default_rng(seed)
+    if N <= dense_max:
+        return linalg.eigh(M.toarray(), np.diag(d), subset_by_index=[0, nev - 1])
+    if N <= lu_max:
+        lu = splu(sparse.csc_matrix(M + 1e-5 * sparse.diags(d)), permc_spec="MMD_AT_PLUS_A")
+        X = rng.standard_normal((N, nev + 4))
+        for _ in range(maxiter):
+            X = np.column_stack([lu.solve(c) for c in (d[:, None] * X).T])
+            MX = M @ X
+            lam, C = linalg.eigh(X.T @ MX, X.T @ (d[:, None] * X))
+            X, MX = X @ C, MX @ C
+            R = MX[:, :nev] - d[:, None] * X[:, :nev] * lam[:nev]
+            res = np.linalg.norm(R, axis=0) / np.linalg.norm(d[:, None] * X[:, :nev], axis=0)
+            if res.max() < tol:
+                break
+        return lam[:nev], X[:, :nev]
+    isq = 1.0 / np.sqrt(d)
+    Nop = (sparse.diags(isq) @ (sparse.diags(d) - M) @ sparse.diags(isq)).tocsr()
+    X = rng.standard_normal((N, nev + 2))
+    if X0 is not None:
+        X[:, :X0.shape[1]] = X0 * np.sqrt(d)[:, None]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "did not reach tolerance": checked below
+        mu, X = lobpcg(Nop, X, largest=True, tol=1e-6, maxiter=maxiter)
+    order = np.argsort(-mu)[:nev]
+    return 1.0 - mu[order], X[:, order] * isq[:, None]

@@ -13,14 +13,26 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from scipy import linalg, sparse
-from scipy.sparse.linalg import cg, lobpcg, splu
+from scipy import sparse
+from scipy.sparse.linalg import cg
 from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from ._graph import (_CHUNK, Array, brute_knn, check_2d, check_connected, knn_graph, local_pca,
-                     polar, same_side, softmax_weights, symmetric_edges)
+from ._graph import (
+    _CHUNK,
+    Array,
+    brute_knn,
+    check_2d,
+    check_connected,
+    knn_graph,
+    local_pca,
+    polar,
+    same_side,
+    smallest_generalized_eigs,
+    softmax_weights,
+    symmetric_edges,
+)
 from .jacobian_regression import jacobian_regression
 
 _KERNELS = ("binet_cauchy", "projection", "none")
@@ -37,54 +49,13 @@ def grassmann_kernel(S: Array, kind: str = "binet_cauchy") -> Array:
     raise ValueError(f"unknown grassmann_kernel {kind!r}; choose one of {_KERNELS}")
 
 
-def smallest_generalized_eigs(M: sparse.spmatrix, d: Array, nev: int, seed: int = 0,
-                              dense_max: int = 1500, lu_max: int = 6000,
-                              X0: Array | None = None, tol: float = 1e-7, maxiter: int = 100
-                              ) -> tuple[Array, Array]:
-    """Smallest ``nev`` eigenpairs of ``M v = lambda diag(d) v`` (M sparse PSD, d > 0).
-
-    Size N <= ``dense_max``: dense ``eigh``. N <= ``lu_max``: block shift-invert
-    subspace iteration with Rayleigh-Ritz (one sparse LU; handles exactly
-    degenerate eigenvalues). Larger: LOBPCG on ``D^-1/2 (D - M) D^-1/2`` (largest),
-    started from ``X0`` (N, <=nev) if given, completed by seeded random columns.
-    Returns eigenvalues (nev,) and D-orthonormal eigenvectors (N, nev).
-    """
-    N = M.shape[0]
-    rng = np.random.default_rng(seed)
-    if N <= dense_max:
-        return linalg.eigh(M.toarray(), np.diag(d), subset_by_index=[0, nev - 1])
-    if N <= lu_max:
-        lu = splu(sparse.csc_matrix(M + 1e-5 * sparse.diags(d)), permc_spec="MMD_AT_PLUS_A")
-        X = rng.standard_normal((N, nev + 4))
-        for _ in range(maxiter):
-            X = np.column_stack([lu.solve(c) for c in (d[:, None] * X).T])
-            MX = M @ X
-            lam, C = linalg.eigh(X.T @ MX, X.T @ (d[:, None] * X))
-            X, MX = X @ C, MX @ C
-            R = MX[:, :nev] - d[:, None] * X[:, :nev] * lam[:nev]
-            res = np.linalg.norm(R, axis=0) / np.linalg.norm(d[:, None] * X[:, :nev], axis=0)
-            if res.max() < tol:
-                break
-        return lam[:nev], X[:, :nev]
-    isq = 1.0 / np.sqrt(d)
-    Nop = (sparse.diags(isq) @ (sparse.diags(d) - M) @ sparse.diags(isq)).tocsr()
-    X = rng.standard_normal((N, nev + 2))
-    if X0 is not None:
-        X[:, :X0.shape[1]] = X0 * np.sqrt(d)[:, None]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # "did not reach tolerance": checked below
-        mu, X = lobpcg(Nop, X, largest=True, tol=1e-6, maxiter=maxiter)
-    order = np.argsort(-mu)[:nev]
-    return 1.0 - mu[order], X[:, order] * isq[:, None]
-
-
 def landmark_frames(Z: Array, Q: Array, n_landmarks: int, n_neighbors: int, kernel: str,
                     seed: int = 0) -> Array | None:
     """Coarse frame field for a warm start: align the frames of a random subsample
     (with the full-sample tangents) and extend them to every point by
     ``H_i = Q_i polar(Q_i^T sum_l K_il H_l)``. None if the subsample graph is
     disconnected."""
-    n, p, q = Q.shape
+    n = Q.shape[0]
     lm = np.sort(np.random.default_rng(seed).permutation(n)[:n_landmarks])
     dist, ind = knn_graph(Z[lm], n_neighbors)
     sigma = 0.5 * float(np.median(dist[:, -1]))
@@ -260,7 +231,7 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
             raise ValueError(f"unknown eigen_solver {self.eigen_solver!r}")
 
     def fit(self, Z: Array, y: None = None, cut: Array | None = None
-            ) -> "GrassmannStiefelEigenmaps":
+            ) -> GrassmannStiefelEigenmaps:
         """Learn the tangent bundle of the sample ``Z`` (n, p).
 
         ``cut`` (n,), optional: a periodic coordinate in radians; graph links whose

@@ -111,7 +111,7 @@ class JacobianRegression(BaseEstimator):
         self.bandwidth = bandwidth
         self.bandwidth_grid = bandwidth_grid
 
-    def fit(self, X: Array, Y: Array, G: Array) -> "JacobianRegression":
+    def fit(self, X: Array, Y: Array, G: Array) -> JacobianRegression:
         """Store the sample ``X`` (n, dx), ``Y`` (n, dy) and Jacobians ``G`` (n, dy, dx)."""
         X = check_2d(X, "X")
         Y = check_2d(Y, "Y")

@@ -175,7 +175,7 @@ class GSERegressor(BaseEstimator):
         return np.median(np.linalg.norm(Jt, axis=2), axis=0)
 
     # --------------------------------------------------------------------- fit
-    def fit(self, W: Array, Theta: Array) -> "GSERegressor":
+    def fit(self, W: Array, Theta: Array) -> GSERegressor:
         """Fit on features ``W`` (n, m) and poses ``Theta`` (n, d)."""
         W, Theta = check_2d(W, "W"), check_2d(Theta, "Theta")
         if W.shape[0] != Theta.shape[0]:
@@ -331,12 +331,12 @@ class GSERegressor(BaseEstimator):
         """Save to ``.npz`` (no pickles; settings as a JSON string)."""
         check_is_fitted(self, "gse_")
         g = self.gse_
-        settings = dict(params={k: (list(v) if isinstance(v, tuple) else v)
+        settings = {"params": {k: (list(v) if isinstance(v, tuple) else v)
                                 for k, v in self.get_params().items()},
-                        gse_params=g.get_params(), w_scale_=self.w_scale_,
-                        bandwidth_w_=self.bandwidth_w_, jr_neighbors_=self.jr_neighbors_, bandwidth_theta_=self.bandwidth_theta_,
-                        gse_bandwidth_=g.bandwidth_, recovery_bandwidth_=g.recovery_bandwidth_,
-                        n_edges_=g.n_edges_, format=1)
+                        "gse_params": g.get_params(), "w_scale_": self.w_scale_,
+                        "bandwidth_w_": self.bandwidth_w_, "jr_neighbors_": self.jr_neighbors_, "bandwidth_theta_": self.bandwidth_theta_,
+                        "gse_bandwidth_": g.bandwidth_, "recovery_bandwidth_": g.recovery_bandwidth_,
+                        "n_edges_": g.n_edges_, "format": 1}
         if isinstance(settings["params"]["theta_scale"], np.ndarray):
             settings["params"]["theta_scale"] = settings["params"]["theta_scale"].tolist()
         arrays = {k: getattr(self, k) if hasattr(self, k) else getattr(g, k) for k in _ARRAYS}
@@ -344,7 +344,7 @@ class GSERegressor(BaseEstimator):
         np.savez(path, settings=np.array(json.dumps(settings)), **arrays)
 
     @classmethod
-    def load(cls, path: str | Path) -> "GSERegressor":
+    def load(cls, path: str | Path) -> GSERegressor:
         """Load a model written by :meth:`save`; ValueError if corrupt or incomplete."""
         try:
             with np.load(path, allow_pickle=False) as f:

@@ -41,7 +41,7 @@ def roll1000():
 
 
 def test_swiss_roll_isometric_embedding_and_health(roll1000):
-    Z, params, iso, g = roll1000
+    Z, _params, iso, g = roll1000
     assert procrustes_r2(g.embedding_, iso) >= 0.999
     # best affine map y -> iso is (nearly) a rotation: singular values ~ 1
     A, *_ = np.linalg.lstsq(np.column_stack([g.embedding_, np.ones(len(Z))]), iso, rcond=None)
@@ -57,7 +57,7 @@ def test_swiss_roll_isometric_embedding_and_health(roll1000):
 
 
 def test_swiss_roll_tangent_angles(roll1000):
-    Z, params, iso, g = roll1000
+    Z, params, _iso, g = roll1000
     T = swiss_roll_tangents(params)
     ang_pca = max_angle_deg(g.tangents_, T)
     ang_G = max_angle_deg(g.recovery_jacobian(g.transform(Z)), T)
@@ -91,7 +91,7 @@ def test_transform_reproduces_training_embedding_and_is_samplewise(roll1000):
 
 
 def test_rotation_and_shuffle_invariance():
-    Z3, params, iso = swiss_roll(1000, seed=3)
+    Z3, params, _iso = swiss_roll(1000, seed=3)
     rng = np.random.default_rng(0)
     E = np.linalg.qr(rng.standard_normal((30, 3)))[0].T  # isometric R^3 -> R^30
     Z = Z3 @ E

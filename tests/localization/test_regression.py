@@ -127,7 +127,7 @@ def _fd(f, X: np.ndarray, eps: float = 1e-6) -> np.ndarray:
 
 @pytest.mark.parametrize("which", ["planar", "pose3"])
 def test_jacobians_match_finite_differences(which, request):
-    W, T, Wt, Tt, phi, model = request.getfixturevalue(which)
+    _W, _T, Wt, Tt, phi, model = request.getfixturevalue(which)
     Tq = Tt[:10].copy()
     if which == "pose3":
         Tq[0, 2], Tq[1, 2] = np.pi - 0.02, -np.pi + 0.01  # both sides of the cut
@@ -144,7 +144,7 @@ def test_jacobians_match_finite_differences(which, request):
 
 
 def test_predictions_are_samplewise(pose3):
-    W, T, Wt, Tt, _, model = pose3
+    _W, _T, Wt, Tt, _, model = pose3
     assert np.allclose(model.predict(Wt[:20])[7], model.predict(Wt[7:8])[0], atol=1e-12)
     assert np.allclose(model.predict_features(Tt[:20])[7],
                        model.predict_features(Tt[7:8])[0], atol=1e-12)
@@ -153,7 +153,7 @@ def test_predictions_are_samplewise(pose3):
 
 
 def test_save_load_roundtrip_and_corruption(pose3, tmp_path):
-    W, T, Wt, Tt, _, model = pose3
+    _W, _T, Wt, Tt, _, model = pose3
     path = tmp_path / "gse.npz"
     model.save(path)
     loaded = GSERegressor.load(path)
@@ -171,7 +171,7 @@ def test_save_load_roundtrip_and_corruption(pose3, tmp_path):
 
 
 def test_out_of_domain_queries(planar):
-    W, T, Wt, Tt, _, model = planar
+    _W, _T, Wt, Tt, _, model = planar
     with pytest.raises(ValueError, match="outside"):
         model.predict(Wt[:2] + 100.0)
     with pytest.raises(ValueError, match="outside"):
