@@ -16,7 +16,10 @@ What is measured
   fit); ``--tracemalloc`` adds a second, traced fit and reports its numpy-level peak too.
 * Latency at each n: ``predict`` (w -> theta) and ``predict_features`` (theta -> w) for
   one point (median of ``latency_repeats`` calls after a warm-up) and for a batch of
-  ``batch_size`` held-out points (median of 3).
+  ``batch_size`` held-out points (median of 3). Single queries are timed twice: with the
+  inherited BLAS/OpenMP threads and inside ``threadpool_limits(1)``: a one-row query is
+  a GEMV that multi-threaded OpenBLAS splits for large n, and on a loaded machine the
+  thread hand-off costs ~10 ms (seen at n = 10000 on a shared 2-core box).
 * Growth exponent: least-squares slope of log(fit time) vs log(n).
 * Accuracy (in this process): train ``accuracy_n_train`` / test ``accuracy_n_test`` samples
   (70/30 of 2500 as in the seed paper) of ``regression_manifold`` with dim_theta = 2 and 3
@@ -33,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import json
 import os
 import platform
@@ -158,6 +162,12 @@ def run_worker(args: Args) -> dict[str, Any]:
     res["predict_batch_ms"] = 1e3 * _median_time(lambda: model.predict(Wt), 3)
     res["predict_features_batch_ms"] = 1e3 * _median_time(lambda: model.predict_features(Tt), 3)
     res["batch_size"] = len(Wt)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(1):  # one query is a GEMV: BLAS threads only add hand-off cost
+        res["predict_1_ms_1thread"] = 1e3 * _median_time(lambda: model.predict(w1), r)
+        res["predict_features_1_ms_1thread"] = 1e3 * _median_time(
+            lambda: model.predict_features(t1), r)
     return res
 
 
@@ -197,6 +207,14 @@ def _fmt_row(r: dict[str, Any]) -> str:
         return f"ERROR: {r['error']}"
     return (f"fit {r['fit_s']:.2f} s, +{r['peak_rss_delta_mib']:.0f} MiB, predict(1) "
             f"{r['predict_1_ms']:.3f} ms, predict_features(1) {r['predict_features_1_ms']:.3f} ms")
+
+
+def local_exponents(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Slopes of log(fit time) vs log(n) between consecutive sizes."""
+    ok = [r for r in rows if "fit_s" in r]
+    return [{"n_from": a["n"], "n_to": b["n"],
+             "exponent": float(np.log(b["fit_s"] / a["fit_s"]) / np.log(b["n"] / a["n"]))}
+            for a, b in itertools.pairwise(ok)]
 
 
 def growth_exponent(rows: list[dict[str, Any]]) -> float | None:
@@ -288,6 +306,10 @@ def targets(args: Args, scaling: list[dict[str, Any]], expo: float | None) -> li
     lat = by_n.get(n_lat, {})
     add(f"predict, one query (n={n_lat})", lat.get("predict_1_ms"), 1.0, "ms")
     add(f"predict_features, one query (n={n_lat})", lat.get("predict_features_1_ms"), 1.0, "ms")
+    add(f"predict, one query, 1 BLAS thread (n={n_lat})", lat.get("predict_1_ms_1thread"), 1.0,
+        "ms")
+    add(f"predict_features, one query, 1 BLAS thread (n={n_lat})",
+        lat.get("predict_features_1_ms_1thread"), 1.0, "ms")
     return out
 
 
@@ -298,17 +320,23 @@ def markdown(args: Args, res: dict[str, Any]) -> str:
              f"{args.threads or 'inherited'}; memory = peak RSS growth during fit (ru_maxrss)."), ""]
     if res["scaling"]:
         lines += ["## Fit time, memory and latency vs n (dim_theta = 3)", "",
+                  "Single-query latency: inherited BLAS threads / 1 thread.", "",
                   ("| n | fit (s) | peak RSS +MiB | predict 1 (ms) | predict_features 1 (ms) | "
-                  f"predict {args.batch_size} (ms) | predict_features {args.batch_size} (ms) |"),
+                   f"predict {args.batch_size} (ms) | predict_features {args.batch_size} (ms) |"),
                   "|---|---|---|---|---|---|---|"]
         for r in res["scaling"]:
             if "error" in r:
                 lines.append(f"| {r['n']} | error: {r['error']} | | | | | |")
                 continue
             lines.append(f"| {r['n']} | {r['fit_s']:.2f} | {r['peak_rss_delta_mib']:.0f} | "
-                         f"{r['predict_1_ms']:.3f} | {r['predict_features_1_ms']:.3f} | "
+                         f"{r['predict_1_ms']:.3f} / {r['predict_1_ms_1thread']:.3f} | "
+                         f"{r['predict_features_1_ms']:.3f} / "
+                         f"{r['predict_features_1_ms_1thread']:.3f} | "
                          f"{r['predict_batch_ms']:.1f} | {r['predict_features_batch_ms']:.1f} |")
-        lines += ["", f"Growth exponent of fit time vs n: {_f(res['growth_exponent'], '{:.2f}')}",
+        local = ", ".join(f"{e['n_from']}->{e['n_to']}: {e['exponent']:.2f}"
+                          for e in res["local_growth_exponents"])
+        lines += ["", ("Growth exponent of fit time vs n (least squares over all n): "
+                       f"{_f(res['growth_exponent'], '{:.2f}')}; between consecutive n: {local}"),
                   ""]
     if res["accuracy"]:
         lines += ["## Accuracy (RRMSE; lower is better)", "",
@@ -329,8 +357,9 @@ def markdown(args: Args, res: dict[str, Any]) -> str:
     if res["targets"]:
         lines += ["## Targets", "", "| target | value | limit | status |", "|---|---|---|---|"]
         for t in res["targets"]:
-            lines.append(f"| {t['target']} | {_f(t['value'], '{:.3f}')} {t['unit']} | "
-                         f"<= {t['limit']:g} {t['unit']} | {t['status']} |")
+            u = f" {t['unit']}" if t["unit"] else ""
+            lines.append(f"| {t['target']} | {_f(t['value'], '{:.3f}')}{u} | "
+                         f"<= {t['limit']:g}{u} | {t['status']} |")
         lines.append("")
     return "\n".join(lines)
 
@@ -355,6 +384,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     res["scaling"] = [] if args.skip_scaling else run_scaling(args)
     res["growth_exponent"] = growth_exponent(res["scaling"])
+    res["local_growth_exponents"] = local_exponents(res["scaling"])
     res["accuracy"] = [] if args.skip_accuracy else run_accuracy(args)
     res["targets"] = targets(args, res["scaling"], res["growth_exponent"]) \
         if res["scaling"] else []
@@ -366,8 +396,9 @@ def main(argv: list[str] | None = None) -> int:
     out.with_suffix(".md").write_text(md + "\n")
     print("\n" + md)
     for t in res["targets"]:
-        print(f"{t['status']:8s} {t['target']}: {_f(t['value'], '{:.3f}')} {t['unit']} "
-              f"(limit {t['limit']:g} {t['unit']})")
+        u = f" {t['unit']}" if t["unit"] else ""
+        print(f"{t['status']:8s} {t['target']}: {_f(t['value'], '{:.3f}')}{u} "
+              f"(limit {t['limit']:g}{u})")
     print(f"\nwrote {out.with_suffix('.json')} and {out.with_suffix('.md')}")
     return 0
 
