@@ -5,14 +5,15 @@ before MuJoCo is imported, and registers ``AppearanceNav-v0``.
 """
 
 from envs import _gl  # noqa: F401  (must run before mujoco is imported)
+
+# isort: split
+import gymnasium as gym
+
+from envs.appearance_nav import AppearanceNavEnv
+from envs.cameras import CAMERAS, make_camera, register_camera
+from envs.datasets import collect_dataset, load_dataset, save_dataset
 from envs.motion_model import UnicycleModel, wrap_angle
-
-import gymnasium as gym  # noqa: E402
-
-from envs.appearance_nav import AppearanceNavEnv  # noqa: E402
-from envs.cameras import CAMERAS, make_camera, register_camera  # noqa: E402
-from envs.datasets import collect_dataset, load_dataset, save_dataset  # noqa: E402
-from envs.scene import City, generate_city  # noqa: E402
+from envs.scene import City, generate_city
 
 if "AppearanceNav-v0" not in gym.registry:
     gym.register(
@@ -22,8 +23,8 @@ if "AppearanceNav-v0" not in gym.registry:
     )
 
 __all__ = [
-    "AppearanceNavEnv",
     "CAMERAS",
+    "AppearanceNavEnv",
     "City",
     "UnicycleModel",
     "collect_dataset",

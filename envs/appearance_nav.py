@@ -8,7 +8,7 @@ observation.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import mujoco
@@ -18,7 +18,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from envs.cameras import TopDownView, check_image_size, make_camera
 from envs.motion_model import UnicycleModel, wrap_angle
-from envs.robot import ACTUATOR_XML, HALF_TRACK, ROBOT_GEOMS, ROBOT_RADIUS, ROBOT_XML, SENSOR_XML, WHEEL_RADIUS
+from envs.robot import (
+    ACTUATOR_XML,
+    HALF_TRACK,
+    ROBOT_GEOMS,
+    ROBOT_RADIUS,
+    ROBOT_XML,
+    SENSOR_XML,
+    WHEEL_RADIUS,
+)
 from envs.scene import City, generate_city
 
 __all__ = ["AppearanceNavEnv"]
@@ -66,7 +74,7 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
     ``COLLISION_PENALTY`` on collision; terminated within ``GOAL_RADIUS`` of the goal.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     V_MAX = 1.0  # m/s
     W_MAX = 1.0  # rad/s

@@ -9,13 +9,14 @@ projection) when that module is available.
 
 from __future__ import annotations
 
-from typing import Any, Callable, Protocol
+from collections.abc import Callable
+from typing import Any, Protocol
 
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["Camera", "PerspectiveCamera", "TopDownView", "CAMERAS", "register_camera", "make_camera", "check_image_size"]
+__all__ = ["CAMERAS", "Camera", "PerspectiveCamera", "TopDownView", "check_image_size", "make_camera", "register_camera"]
 
 MIN_IMAGE_SIDE = 16
 MAX_IMAGE_SIDE = 1024
@@ -46,7 +47,8 @@ def check_image_size(image_size: object) -> tuple[int, int]:
         raise ValueError(f"image_size must be a pair (H, W) of integers, got {image_size!r}") from None
     for v in (h, w):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
-            raise ValueError(f"image_size must contain integers, got {image_size!r}")
+            # the contract: bad inputs raise ValueError
+            raise ValueError(f"image_size must contain integers, got {image_size!r}")  # noqa: TRY004
         if not MIN_IMAGE_SIDE <= v <= MAX_IMAGE_SIDE:
             raise ValueError(
                 f"image_size sides must be in [{MIN_IMAGE_SIDE}, {MAX_IMAGE_SIDE}] pixels, got {image_size!r}"

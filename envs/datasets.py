@@ -16,6 +16,7 @@ rendered, which is fast.
 from __future__ import annotations
 
 import json
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +28,7 @@ from tqdm.auto import tqdm
 from envs.motion_model import wrap_angle
 from envs.robot import ROBOT_RADIUS
 
-__all__ = ["MODES", "collect_dataset", "grid_poses", "save_dataset", "load_dataset", "PurePursuit"]
+__all__ = ["MODES", "PurePursuit", "collect_dataset", "grid_poses", "load_dataset", "save_dataset"]
 
 MODES = ("grid", "random", "route")
 POSE_MARGIN = ROBOT_RADIUS + 0.1  # m of clearance to buildings for teleported poses
@@ -70,7 +71,7 @@ class PurePursuit:
     def __init__(self, waypoints: NDArray[np.float64], lookahead: float = 0.8, speed: float = 0.6,
                  w_max: float = 1.0, step: float = 0.05) -> None:
         loop = np.vstack([waypoints, waypoints[:1]])
-        pts = [a + (b - a) * t for a, b in zip(loop[:-1], loop[1:])
+        pts = [a + (b - a) * t for a, b in pairwise(loop)
                for t in np.arange(0, 1, step / max(np.hypot(*(b - a)), 1e-9))]
         self.path = np.array(pts)
         self.lookahead, self.speed, self.w_max, self.step = lookahead, speed, w_max, step

@@ -16,6 +16,7 @@ plan over (:meth:`City.street_graph`), a closed driving loop
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 import numpy as np
 from numpy.typing import NDArray
@@ -274,7 +275,7 @@ class City:
                                | ((dy <= hw) & (dx <= hw + 0.6) & zebra_y))] = (0.92, 0.92, 0.92)
         return (img * 255).astype(np.uint8)
 
-    def paint_textures(self, model: "mujoco.MjModel") -> None:  # noqa: F821
+    def paint_textures(self, model: mujoco.MjModel) -> None:  # noqa: F821
         """Write :meth:`ground_image` into the compiled model's floor texture (before any renderer exists)."""
         import mujoco
 
@@ -309,13 +310,13 @@ class City:
         """Assets and visual-only geoms: floor (painted by :meth:`paint_textures`), skyline, horizon."""
         f = far + 2.0
         assets = [
-            f'<texture name="ground" type="2d" builtin="flat" width="{GROUND_PIXELS}" height="{GROUND_PIXELS}" '
-            'rgb1="0.3 0.3 0.3"/>',
+            (f'<texture name="ground" type="2d" builtin="flat" width="{GROUND_PIXELS}" '
+             f'height="{GROUND_PIXELS}" rgb1="0.3 0.3 0.3"/>'),
             '<material name="ground" texture="ground" texrepeat="1 1"/>',
         ]
         # a plane's third size is its rendering grid spacing: one big cell draws fastest
-        geoms = [f'<geom name="floor" type="plane" size="{f:.3f} {f:.3f} {f:.3f}" material="ground" '
-                 'contype="1" conaffinity="1" group="0"/>']
+        geoms = [(f'<geom name="floor" type="plane" size="{f:.3f} {f:.3f} {f:.3f}" material="ground" '
+                  'contype="1" conaffinity="1" group="0"/>')]
         for i, b in enumerate(self.skyline):
             geoms.append(
                 f'<geom name="skyline{i}" type="box" pos="{_fmt(b.center)}" size="{_fmt(b.half_size)}" '
@@ -413,8 +414,8 @@ def generate_city(
     half_w = 0.5 * street_width
     blocks = [
         (np.array([x0 + half_w, y0 + half_w]), np.array([x1 - half_w, y1 - half_w]))
-        for y0, y1 in zip(centers[:-1], centers[1:])
-        for x0, x1 in zip(centers[:-1], centers[1:])
+        for y0, y1 in pairwise(centers)
+        for x0, x1 in pairwise(centers)
     ]
     buildings: list[Building] = []
     for lo, hi in blocks:

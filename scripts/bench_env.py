@@ -39,13 +39,15 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-import envs  # noqa: E402  (chooses MUJOCO_GL before mujoco is imported)
-import gymnasium as gym  # noqa: E402
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
+import envs  # chooses MUJOCO_GL before mujoco is imported
 
-from envs.cameras import make_camera  # noqa: E402
-from envs.robot import HALF_TRACK, WHEEL_RADIUS  # noqa: E402
+# isort: split
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from envs.cameras import make_camera
+from envs.robot import HALF_TRACK, WHEEL_RADIUS
 
 TARGET_STEPS_PER_S = 1000.0
 TARGET_RATIO = 0.8
@@ -175,7 +177,7 @@ def gl_renderer() -> str:
         name = GL.glGetString(GL.GL_RENDERER).decode()
         r.close()
         return name
-    except Exception as err:  # informative only
+    except (ImportError, AttributeError, RuntimeError, mujoco.FatalError) as err:  # informative only
         return f"unknown ({err})"
 
 
@@ -183,11 +185,11 @@ def markdown(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
     lines = [
         "# AppearanceNav-v0 step throughput",
         "",
-        f"Random policy, dt = {meta['dt']} s ({meta['frame_skip']} physics steps per env step). env and raw "
-        f"alternate in chunks of {meta['chunk']} steps, {meta['steps']} steps each; steps/s = median over "
-        f"chunks (best chunk in brackets), env/raw = median of per-chunk ratios. GL: {meta['gl_renderer']}, "
-        f"MUJOCO_GL={meta['mujoco_gl']}, {meta['cpu_count']} CPUs, load average at start {meta['loadavg']}, "
-        f"at end {meta['loadavg_end']}.",
+        (f"Random policy, dt = {meta['dt']} s ({meta['frame_skip']} physics steps per env step). env and raw "
+         f"alternate in chunks of {meta['chunk']} steps, {meta['steps']} steps each; steps/s = median over "
+         f"chunks (best chunk in brackets), env/raw = median of per-chunk ratios. GL: {meta['gl_renderer']}, "
+         f"MUJOCO_GL={meta['mujoco_gl']}, {meta['cpu_count']} CPUs, load average at start {meta['loadavg']}, "
+         f"at end {meta['loadavg_end']}."),
         "",
         "| camera | image | env steps/s | raw step+render/s | env/raw | >= 1000/s | >= 0.8x |",
         "|---|---|---:|---:|---:|---|---|",

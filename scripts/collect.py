@@ -22,8 +22,10 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-import envs  # noqa: E402  (chooses MUJOCO_GL before mujoco is imported)
-import gymnasium as gym  # noqa: E402
+import envs  # chooses MUJOCO_GL before mujoco is imported
+
+# isort: split
+import gymnasium as gym
 
 
 @dataclass

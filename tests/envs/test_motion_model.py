@@ -42,7 +42,7 @@ def test_jacobians_match_finite_differences(u):
     for _ in range(5):
         pose = np.array([*rng.uniform(-5, 5, 2), rng.uniform(-np.pi + 0.1, np.pi - 0.1)])
         num_x = numeric_jacobian(lambda p: F.predict(p, u), pose)
-        num_u = numeric_jacobian(lambda c: F.predict(pose, c), np.asarray(u, dtype=np.float64))
+        num_u = numeric_jacobian(lambda c, p=pose: F.predict(p, c), np.asarray(u, dtype=np.float64))
         assert np.allclose(F.jacobian_pose(pose, u), num_x, atol=1e-6)
         assert np.allclose(F.jacobian_control(pose, u), num_u, atol=1e-6)
 

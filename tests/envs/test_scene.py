@@ -1,6 +1,8 @@
 """The generated city: determinism, free space, street graph, route, MJCF."""
 
 import envs  # noqa: F401  (first: chooses MUJOCO_GL before mujoco is imported)
+
+# isort: split
 import mujoco
 import numpy as np
 import pytest
