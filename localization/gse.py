@@ -327,15 +327,13 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
             out[s:s + _CHUNK][bad] = np.nan
         return out
 
-    def _recover(self, Y: Array, cols: np.ndarray | slice = slice(None), jacobian: bool = False,
-                 exclude_self: bool = False) -> tuple[Array, Array | None, Array]:
+    def _recover(self, Y: Array, cols: np.ndarray | slice = slice(None), jacobian: bool = False
+                 ) -> tuple[Array, Array | None, Array]:
         """g(Y) restricted to ambient columns ``cols`` (JR in y with slopes H_j, bandwidth
         ``recovery_bandwidth_``) and its exact Jacobian dg/dy."""
-        k = self.n_neighbors + int(exclude_self)
+        k = self.n_neighbors
         d, ind = self._ytree.query(Y, k=k)
         d, ind = np.asarray(d).reshape(len(Y), k), np.asarray(ind).reshape(len(Y), k)
-        if exclude_self:  # leave-one-out on the training embedding
-            d, ind = d[:, 1:], ind[:, 1:]
         dY = Y[:, None, :] - self.embedding_[ind]
         s = self.recovery_bandwidth_
         logw = -0.5 * (dY ** 2).sum(axis=2) / s ** 2
@@ -356,11 +354,16 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
         0.5 fit values slightly better but make g wiggly: its Jacobian (the EKF's H)
         then degrades (measured 0.12 -> 0.25 relative error on the planar test)."""
         check_is_fitted(self, "embedding_")
+        _, ind = self._ytree.query(self.embedding_, k=self.n_neighbors + 1)
+        ind = ind[:, 1:]  # leave one out
+        dY = self.embedding_[:, None, :] - self.embedding_[ind]
+        Zc = self.Z_[:, cols]
+        ell = Zc[ind] + np.einsum("nkpq,nkq->nkp", self.frames_[:, cols, :][ind], dY)
+        d2 = (dY ** 2).sum(axis=2)
         errs = []
         for f in factors:
-            self.recovery_bandwidth_ = f * self.bandwidth_
-            g, _, _ = self._recover(self.embedding_, cols, exclude_self=True)
-            errs.append(float(((g - self.Z_[:, cols]) ** 2).sum(axis=1).mean()))
+            w, _ = softmax_weights(-0.5 * d2 / (f * self.bandwidth_) ** 2)
+            errs.append(float(((np.einsum("nk,nkp->np", w, ell) - Zc) ** 2).sum(axis=1).mean()))
         self.recovery_bandwidth_ = factors[int(np.argmin(errs))] * self.bandwidth_
         return np.array(errs)
 

@@ -17,6 +17,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
@@ -226,14 +227,15 @@ class GSERegressor(BaseEstimator):
         # leave-one-out bandwidths of the two Jacobian regressions
         y = self.embedding_
         self.jr_neighbors_ = kj = min(self.jr_neighbors or k, n - 2)
-        d2, ind_w = brute_knn(Ws, self._ws_sqn, Ws, kj + 1)
-        ind_w, dist_w = ind_w[:, 1:], np.sqrt(d2[:, 1:])
+        if kj != k:
+            d2, ind_w = brute_knn(Ws, self._ws_sqn, Ws, kj + 1)
+            ind_w, dist_w = ind_w[:, 1:], np.sqrt(d2[:, 1:])
         mask = same_side(self.theta_[ind_w][..., self._per[0]]) if self._per else None
         grid = np.asarray(self.bandwidth_grid)
         self.bandwidth_w_, _ = loo_bandwidth(
             Ws[:, None, :] - Ws[ind_w], y[ind_w], self.Gr_[ind_w], y,
             grid * np.median(dist_w[:, -1]), mask)
-        d2, ind_t = brute_knn(self._zv, self._zv_sqn, self._zv, kj + 1)
+        _, ind_t = self._zv_tree.query(self._zv, k=kj + 1)
         ind_t = ind_t[:, 1:]
         dX = self._pose_diff(Theta, Theta[ind_t])
         mask = same_side(self.theta_[ind_t][..., self._per[0]]) if self._per else None
@@ -245,10 +247,10 @@ class GSERegressor(BaseEstimator):
     def _setup(self) -> None:
         """Derived per-sample query structures (after fit or load)."""
         m = len(self.w_mean_)
-        self._ws = self.gse_.Z_[:, :m]
+        self._ws = np.ascontiguousarray(self.gse_.Z_[:, :m])  # contiguous: fast GEMM queries
         self._ws_sqn = (self._ws ** 2).sum(axis=1)
-        self._zv = self.gse_.Z_[:, m:]
-        self._zv_sqn = (self._zv ** 2).sum(axis=1)
+        self._zv = np.ascontiguousarray(self.gse_.Z_[:, m:])
+        self._zv_tree = cKDTree(self._zv)  # pose space is low-dimensional
         self.embedding_ = self.gse_.embedding_
 
     # ----------------------------------------------------------------- predict
@@ -283,7 +285,8 @@ class GSERegressor(BaseEstimator):
         Theta = self._check(Theta, "Theta", "theta_scale_").copy()
         for c in self._per:
             Theta[:, c] = wrap_angle(Theta[:, c])
-        _, ind = brute_knn(self._zv, self._zv_sqn, self._lift(Theta), self.jr_neighbors_)
+        _, ind = self._zv_tree.query(self._lift(Theta), k=self.jr_neighbors_)
+        ind = np.asarray(ind).reshape(len(Theta), -1)
         mask = same_side(self.theta_[ind][..., self._per[0]]) if self._per else None
         R, J, log_sum = gaussian_jr(self._pose_diff(Theta, self.theta_[ind]), self.embedding_[ind],
                                     self.GR_[ind], self.bandwidth_theta_, mask, jacobian)
