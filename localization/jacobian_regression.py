@@ -61,26 +61,31 @@ def jacobian_regression(dX: Array, Y_nb: Array, G_nb: Array, logw: Array,
 
 
 def gaussian_jr(dX: Array, Y_nb: Array, G_nb: Array, bandwidth: float,
-                mask: NDArray[np.bool_] | None = None, jacobian: bool = False
-                ) -> tuple[Array, Array | None, Array]:
-    """:func:`jacobian_regression` with the Gaussian kernel ``exp(-|dx|^2 / (2 sigma^2))``."""
+                mask: NDArray[np.bool_] | None = None, jacobian: bool = False,
+                log_factor: Array | None = None) -> tuple[Array, Array | None, Array]:
+    """:func:`jacobian_regression` with the Gaussian kernel ``exp(-|dx|^2 / (2 sigma^2))``,
+    optionally times a factor ``exp(log_factor)`` (n, k) treated as locally constant
+    (not differentiated)."""
     logw = -0.5 * (dX ** 2).sum(axis=2) / bandwidth ** 2
+    if log_factor is not None:
+        logw = logw + log_factor
     if mask is not None:
         logw = np.where(mask, logw, -np.inf)
     grad = -dX / bandwidth ** 2 if jacobian else None
     return jacobian_regression(dX, Y_nb, G_nb, logw, grad)
 
 
-def loo_bandwidth(dX: Array, Y_nb: Array, G_nb: Array, Y: Array,
-                  grid: Array, mask: NDArray[np.bool_] | None = None) -> tuple[float, Array]:
+def loo_bandwidth(dX: Array, Y_nb: Array, G_nb: Array, Y: Array, grid: Array,
+                  mask: NDArray[np.bool_] | None = None, log_factor: Array | None = None
+                  ) -> tuple[float, Array]:
     """Leave-one-out choice of the Gaussian JR bandwidth.
 
     ``dX``, ``Y_nb``, ``G_nb`` describe the neighbourhoods of the *training*
     points themselves with the point excluded; ``Y`` (n, dy) are the targets.
     Returns the best bandwidth and the LOO mean squared errors over ``grid``.
     """
-    mse = np.array([((gaussian_jr(dX, Y_nb, G_nb, s, mask)[0] - Y) ** 2).sum(axis=1).mean()
-                    for s in grid])
+    mse = np.array([((gaussian_jr(dX, Y_nb, G_nb, s, mask, log_factor=log_factor)[0] - Y) ** 2
+                      ).sum(axis=1).mean() for s in grid])
     return float(grid[int(np.argmin(mse))]), mse
 
 

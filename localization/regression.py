@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from ._graph import Array, brute_knn, check_2d, knn_graph, same_side
+from ._graph import Array, brute_knn, check_2d, knn_graph, local_pca, same_side
 from .gse import GrassmannStiefelEigenmaps
 from .jacobian_regression import BANDWIDTH_GRID, gaussian_jr, loo_bandwidth
 
@@ -77,6 +77,15 @@ class GSERegressor(BaseEstimator):
         Relative grid for the leave-one-out JR bandwidths.
     out_of_domain : {"raise", "nan"}, default="raise"
     random_state : int, default=0
+    theta_scale_factor : float, default=2.0
+        With theta_scale="auto": lambda_c = factor x median |dw/dtheta_c| (pose columns
+        then weigh a bit more than features, which keeps cond(G_v) near 1).
+    jr_neighbors : int or None, default=None
+        Neighbours of the two Jacobian regressions (None: n_neighbors).
+    kernel_grassmann : bool, default=False
+        Multiply K_W by the Binet-Cauchy factor between the local PCA tangent of the
+        w-sample at the query and Span(G_u) at the sample (spec 3.2). The factor is not
+        differentiated: embed_jacobian then ignores its (small) derivative.
 
     Attributes
     ----------
@@ -95,7 +104,8 @@ class GSERegressor(BaseEstimator):
                  project_features: bool = False, ridge: float = 0.0,
                  bandwidth_grid: tuple[float, ...] = BANDWIDTH_GRID,
                  out_of_domain: str = "raise", random_state: int = 0,
-                 theta_scale_factor: float = 2.0, jr_neighbors: int | None = None) -> None:
+                 theta_scale_factor: float = 2.0, jr_neighbors: int | None = None,
+                 kernel_grassmann: bool = False) -> None:
         self.n_components = n_components
         self.n_neighbors = n_neighbors
         self.periodic = periodic
@@ -109,6 +119,7 @@ class GSERegressor(BaseEstimator):
         self.random_state = random_state
         self.theta_scale_factor = theta_scale_factor
         self.jr_neighbors = jr_neighbors
+        self.kernel_grassmann = kernel_grassmann
 
     # ----------------------------------------------------------------- geometry
     def _periodic(self, d: int) -> tuple[int, ...]:
@@ -214,9 +225,10 @@ class GSERegressor(BaseEstimator):
         self.gse_.select_recovery_bandwidth()
         H = self.gse_.frames_
         self.Gr_ = pinv_blocks(H[:, :m, :])
+        Bq, _ = np.linalg.qr(H[:, :m, :])
+        self._w_tangents = Bq
         if self.project_features:
             w = np.exp(-0.5 * (dist_w / (0.5 * np.median(dist_w[:, -1]))) ** 2)
-            from ._graph import local_pca
             U = local_pca(Ws, Ws, ind_w, w, q)
             self.Gr_ = (self.Gr_ @ U) @ np.swapaxes(U, 1, 2)
         Hv = H[:, m:, :]
@@ -232,9 +244,10 @@ class GSERegressor(BaseEstimator):
             ind_w, dist_w = ind_w[:, 1:], np.sqrt(d2[:, 1:])
         mask = same_side(self.theta_[ind_w][..., self._per[0]]) if self._per else None
         grid = np.asarray(self.bandwidth_grid)
+        self._pca_bw = 0.5 * float(np.median(dist_w[:, -1]))
         self.bandwidth_w_, _ = loo_bandwidth(
             Ws[:, None, :] - Ws[ind_w], y[ind_w], self.Gr_[ind_w], y,
-            grid * np.median(dist_w[:, -1]), mask)
+            grid * np.median(dist_w[:, -1]), mask, self._w_factor(Ws, ind_w))
         _, ind_t = self._zv_tree.query(self._zv, k=kj + 1)
         ind_t = ind_t[:, 1:]
         dX = self._pose_diff(Theta, Theta[ind_t])
@@ -249,6 +262,7 @@ class GSERegressor(BaseEstimator):
         m = len(self.w_mean_)
         self._ws = np.ascontiguousarray(self.gse_.Z_[:, :m])  # contiguous: fast GEMM queries
         self._ws_sqn = (self._ws ** 2).sum(axis=1)
+        self._ws_tree = cKDTree(self._ws)
         self._zv = np.ascontiguousarray(self.gse_.Z_[:, m:])
         self._zv_tree = cKDTree(self._zv)  # pose space is low-dimensional
         self.embedding_ = self.gse_.embedding_
@@ -269,13 +283,28 @@ class GSERegressor(BaseEstimator):
                 if o is not None:
                     o[bad] = np.nan
 
+    def _w_factor(self, Ws: Array, ind: Array) -> Array | None:
+        """log Binet-Cauchy factor of K_W (n, k), or None when kernel_grassmann is off."""
+        if not self.kernel_grassmann:
+            return None
+        d2 = ((Ws[:, None, :] - self._ws[ind]) ** 2).sum(axis=2)
+        L = local_pca(self._ws, Ws, ind, np.exp(-0.5 * d2 / self._pca_bw ** 2),
+                      self.embedding_.shape[1])
+        S = np.einsum("nma,nkmb->nkab", L, self._w_tangents[ind])
+        with np.errstate(divide="ignore"):
+            return np.log(np.linalg.det(S) ** 2)
+
     def _r_star(self, W: Array, jacobian: bool) -> tuple[Array, Array | None]:
         W = self._check(W, "W", "w_mean_")
         Ws = (W - self.w_mean_) / self.w_scale_
-        _, ind = brute_knn(self._ws, self._ws_sqn, Ws, self.jr_neighbors_)
+        if len(Ws) <= 32:  # single queries: a KD-tree beats a GEMM over all samples
+            ind = np.asarray(self._ws_tree.query(Ws, k=self.jr_neighbors_)[1]).reshape(len(Ws), -1)
+        else:
+            ind = brute_knn(self._ws, self._ws_sqn, Ws, self.jr_neighbors_)[1]
         mask = same_side(self.theta_[ind][..., self._per[0]]) if self._per else None
         r, J, log_sum = gaussian_jr(Ws[:, None, :] - self._ws[ind], self.embedding_[ind],
-                                    self.Gr_[ind], self.bandwidth_w_, mask, jacobian)
+                                    self.Gr_[ind], self.bandwidth_w_, mask, jacobian,
+                                    self._w_factor(Ws, ind))
         if J is not None:
             J /= self.w_scale_
         self._flag(log_sum, "W", r, J)
@@ -334,12 +363,14 @@ class GSERegressor(BaseEstimator):
         """Save to ``.npz`` (no pickles; settings as a JSON string)."""
         check_is_fitted(self, "gse_")
         g = self.gse_
-        settings = {"params": {k: (list(v) if isinstance(v, tuple) else v)
-                                for k, v in self.get_params().items()},
-                        "gse_params": g.get_params(), "w_scale_": self.w_scale_,
-                        "bandwidth_w_": self.bandwidth_w_, "jr_neighbors_": self.jr_neighbors_, "bandwidth_theta_": self.bandwidth_theta_,
-                        "gse_bandwidth_": g.bandwidth_, "recovery_bandwidth_": g.recovery_bandwidth_,
-                        "n_edges_": g.n_edges_, "format": 1}
+        settings = {
+            "params": {k: (list(v) if isinstance(v, tuple) else v)
+                       for k, v in self.get_params().items()},
+            "gse_params": g.get_params(), "w_scale_": self.w_scale_,
+            "bandwidth_w_": self.bandwidth_w_, "bandwidth_theta_": self.bandwidth_theta_,
+            "jr_neighbors_": self.jr_neighbors_, "pca_bw": self._pca_bw,
+            "gse_bandwidth_": g.bandwidth_, "recovery_bandwidth_": g.recovery_bandwidth_,
+            "n_edges_": g.n_edges_, "format": 1}
         if isinstance(settings["params"]["theta_scale"], np.ndarray):
             settings["params"]["theta_scale"] = settings["params"]["theta_scale"].tolist()
         arrays = {k: getattr(self, k) if hasattr(self, k) else getattr(g, k) for k in _ARRAYS}
@@ -367,6 +398,7 @@ class GSERegressor(BaseEstimator):
             g.n_components_graph_ = 1
             self.w_scale_ = float(s["w_scale_"])
             self.jr_neighbors_ = int(s["jr_neighbors_"])
+            self._pca_bw = float(s["pca_bw"])
             self.bandwidth_w_, self.bandwidth_theta_ = (float(s["bandwidth_w_"]),
                                                         float(s["bandwidth_theta_"]))
             n, p_, q = g.frames_.shape
@@ -388,6 +420,7 @@ class GSERegressor(BaseEstimator):
         g._setup()
         self.gse_ = g
         self._setup()
+        self._w_tangents = np.linalg.qr(g.frames_[:, :m, :])[0]
         return self
 
 

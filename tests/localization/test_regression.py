@@ -218,3 +218,10 @@ def test_select_n_neighbors():
     W, T, _ = regression_manifold(400, dim_theta=2, seed=0)
     k, scores = select_n_neighbors(W, T, grid=(12, 20), cv=2)
     assert k in (12, 20) and set(scores) == {12, 20} and all(np.isfinite(list(scores.values())))
+
+
+def test_grassmann_factor_option(planar):
+    W, T, Wt, Tt, _, _ = planar
+    model = GSERegressor(n_neighbors=20, kernel_grassmann=True).fit(W, T)
+    assert rrmse(model.predict(Wt), Tt) < 0.015  # measured 0.0025 (0.0026 without)
+    assert np.allclose(model.predict(Wt[:9])[4], model.predict(Wt[4:5])[0], atol=1e-12)
