@@ -26,8 +26,8 @@ __all__ = ["Building", "City", "generate_city"]
 _LANDMARK_COLOURS = np.array(
     [[0.9, 0.1, 0.1], [0.1, 0.3, 0.95], [0.95, 0.85, 0.1], [0.1, 0.8, 0.2], [0.8, 0.1, 0.8]]
 )
-# horizon walls: distinct colours per side so heading is visible from far away
 GROUND_PIXELS = 1024  # floor texture side
+# horizon walls: distinct colours per side so heading is visible from far away
 _HORIZON = {"E": (0.85, 0.55, 0.35), "N": (0.45, 0.6, 0.85), "W": (0.55, 0.8, 0.55), "S": (0.8, 0.75, 0.5)}
 
 
@@ -49,13 +49,6 @@ class Building:
     rgb: tuple[float, float, float]
     window_rgb: tuple[float, float, float]
     landmark: bool = False
-
-    def contains(self, x: float, y: float, margin: float = 0.0) -> bool:
-        """Return whether (x, y) lies within the footprint grown by ``margin``."""
-        return (
-            abs(x - self.center[0]) < self.half_size[0] + margin
-            and abs(y - self.center[1]) < self.half_size[1] + margin
-        )
 
 
 @dataclass
@@ -101,14 +94,7 @@ class City:
 
     def is_free(self, x: float, y: float, margin: float = 0.0) -> bool:
         """Return whether a disc of radius ``margin`` at (x, y) is inside the city and off buildings."""
-        if not (np.isfinite(x) and np.isfinite(y)):
-            return False
-        if abs(x) > self.half - margin or abs(y) > self.half - margin:
-            return False
-        fp = self._fp
-        inside = (fp[:, 0] - margin < x) & (x < fp[:, 2] + margin)
-        inside &= (fp[:, 1] - margin < y) & (y < fp[:, 3] + margin)
-        return not bool(inside.any())
+        return bool(self.free_mask(np.array([[x, y]], dtype=np.float64), margin)[0])
 
     def free_mask(self, points: NDArray[np.float64], margin: float = 0.0) -> NDArray[np.bool_]:
         """Vectorised :meth:`is_free` for (n, 2) points, returns (n,) bool."""
