@@ -13,7 +13,6 @@ the neighbours on the nearest neighbour's side of the cut.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -22,11 +21,9 @@ from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
 from ._graph import Array, brute_knn, check_2d, knn_graph, local_pca, same_side
+from ._io import load_regressor, save_regressor
 from .gse import GrassmannStiefelEigenmaps
 from .jacobian_regression import BANDWIDTH_GRID, gaussian_jr, loo_bandwidth
-
-_ARRAYS = ("w_mean_", "theta_center_", "theta_scale_", "theta_", "Gr_", "GR_", "Z_", "tangents_",
-           "frames_", "embedding_", "alignment_eigenvalues_", "frame_condition_")
 
 
 def wrap_angle(a: Array) -> Array:
@@ -362,66 +359,12 @@ class GSERegressor(BaseEstimator):
     def save(self, path: str | Path) -> None:
         """Save to ``.npz`` (no pickles; settings as a JSON string)."""
         check_is_fitted(self, "gse_")
-        g = self.gse_
-        settings = {
-            "params": {k: (list(v) if isinstance(v, tuple) else v)
-                       for k, v in self.get_params().items()},
-            "gse_params": g.get_params(), "w_scale_": self.w_scale_,
-            "bandwidth_w_": self.bandwidth_w_, "bandwidth_theta_": self.bandwidth_theta_,
-            "jr_neighbors_": self.jr_neighbors_, "pca_bw": self._pca_bw,
-            "gse_bandwidth_": g.bandwidth_, "recovery_bandwidth_": g.recovery_bandwidth_,
-            "n_edges_": g.n_edges_, "format": 1}
-        if isinstance(settings["params"]["theta_scale"], np.ndarray):
-            settings["params"]["theta_scale"] = settings["params"]["theta_scale"].tolist()
-        arrays = {k: getattr(self, k) if hasattr(self, k) else getattr(g, k) for k in _ARRAYS}
-        arrays["cut_"] = np.zeros(0) if g.cut_ is None else g.cut_
-        np.savez(path, settings=np.array(json.dumps(settings)), **arrays)
+        save_regressor(self, path)
 
     @classmethod
     def load(cls, path: str | Path) -> GSERegressor:
         """Load a model written by :meth:`save`; ValueError if corrupt or incomplete."""
-        try:
-            with np.load(path, allow_pickle=False) as f:
-                data = {k: f[k] for k in f.files}
-            s = json.loads(str(data["settings"]))
-            p = s["params"]
-            p["periodic"] = tuple(p["periodic"])
-            p["bandwidth_grid"] = tuple(p["bandwidth_grid"])
-            self = cls(**p)
-            g = GrassmannStiefelEigenmaps(**s["gse_params"])
-            for k in _ARRAYS:
-                setattr(self if k.endswith(("mean_", "center_", "scale_")) or k in
-                        ("theta_", "Gr_", "GR_") else g, k, np.asarray(data[k], dtype=np.float64))
-            g.cut_ = data["cut_"] if data["cut_"].size else None
-            g.bandwidth_, g.n_edges_ = float(s["gse_bandwidth_"]), int(s["n_edges_"])
-            g.recovery_bandwidth_ = float(s["recovery_bandwidth_"])
-            g.n_components_graph_ = 1
-            self.w_scale_ = float(s["w_scale_"])
-            self.jr_neighbors_ = int(s["jr_neighbors_"])
-            self._pca_bw = float(s["pca_bw"])
-            self.bandwidth_w_, self.bandwidth_theta_ = (float(s["bandwidth_w_"]),
-                                                        float(s["bandwidth_theta_"]))
-            n, p_, q = g.frames_.shape
-            m, d = len(self.w_mean_), len(self.theta_scale_)
-            self._per = self._periodic(d)
-            shapes_ok = (g.Z_.shape == (n, p_) and g.tangents_.shape == (n, p_, q)
-                         and g.embedding_.shape == (n, q) and self.theta_.shape == (n, d)
-                         and self.Gr_.shape == (n, q, m) and self.GR_.shape == (n, q, d)
-                         and p_ == m + d + len(self._per)
-                         and (g.cut_ is None or g.cut_.shape == (n,)))
-            if not shapes_ok:
-                raise ValueError("inconsistent array shapes")
-            if not all(np.isfinite(getattr(self if hasattr(self, k) else g, k)).all()
-                       for k in ("Z_", "frames_", "embedding_", "Gr_", "GR_")):
-                raise ValueError("non-finite values")
-        except Exception as exc:  # zipfile, KeyError, JSON, shape errors -> one clear message
-            raise ValueError(f"cannot load GSERegressor from {path}: corrupted or incomplete "
-                             f"file ({type(exc).__name__}: {exc})") from exc
-        g._setup()
-        self.gse_ = g
-        self._setup()
-        self._w_tangents = np.linalg.qr(g.frames_[:, :m, :])[0]
-        return self
+        return load_regressor(cls, path)
 
 
 def select_n_neighbors(W: Array, Theta: Array, grid: tuple[int, ...] = (10, 15, 20, 30),
