@@ -213,7 +213,7 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
         self.out_of_domain = out_of_domain
         self.random_state = random_state
 
-    def _validate_params(self, n: int, p: int) -> None:  # type: ignore[override]
+    def _check_params(self, n: int, p: int) -> None:
         q, k = self.n_components, self.n_neighbors
         if not (isinstance(q, (int, np.integer)) and 1 <= q < p):
             raise ValueError(f"n_components={q} must be an integer in [1, ambient dim - 1] = "
@@ -240,7 +240,7 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
         """
         Z = check_2d(Z, "Z")
         n, p = Z.shape
-        self._validate_params(n, p)
+        self._check_params(n, p)
         q, k = self.n_components, self.n_neighbors
         dist, ind = knn_graph(Z, k)
         sigma = (0.5 * float(np.median(dist[:, -1])) if self.bandwidth == "auto"
@@ -249,6 +249,9 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
             raise ValueError(f"bandwidth must be positive, got {sigma}")
         Q = local_pca(Z, Z, ind, np.exp(-0.5 * (dist / sigma) ** 2), q)
         self.cut_ = None if cut is None else np.asarray(cut, dtype=np.float64).ravel()
+        if self.cut_ is not None and (self.cut_.shape != (n,) or not np.isfinite(self.cut_).all()):
+            raise ValueError(f"cut must be {n} finite angles (one per sample), got shape "
+                             f"{np.shape(cut)}")
         allowed = None if cut is None else same_side(
             np.column_stack([self.cut_, self.cut_[ind]]))[:, 1:]
         ei, ej = symmetric_edges(ind, allowed)

@@ -212,7 +212,9 @@ class GSERegressor(BaseEstimator):
         else:
             self.theta_scale_ = np.broadcast_to(np.asarray(self.theta_scale, float), (d,)).copy()
         if not np.all(self.theta_scale_ > 0):
-            raise ValueError(f"theta_scale must be positive, got {self.theta_scale_}")
+            raise ValueError(f"theta_scale must be positive, got {self.theta_scale_}: with "
+                             "theta_scale='auto' a zero means the features do not vary with "
+                             "that Theta column (drop it or pass theta_scale explicitly)")
         self.theta_ = Theta
         Z = np.column_stack([Ws, self._lift(Theta)])
         self.gse_ = GrassmannStiefelEigenmaps(

@@ -79,6 +79,16 @@ def test_reconstruction_shrinks_with_n():
     assert np.all(oos < 3 * ins)  # out-of-sample error of the same order
 
 
+def test_fit_is_deterministic(roll1000):
+    Z, _, _, g = roll1000
+    assert np.array_equal(GrassmannStiefelEigenmaps(2, n_neighbors=15).fit(Z).embedding_,
+                          g.embedding_)
+    Z3, _ = curved_3manifold(1200, seed=1, ambient_dim=30)  # LOBPCG path (n q > 3000)
+    a = GrassmannStiefelEigenmaps(3, n_neighbors=20).fit(Z3)
+    b = GrassmannStiefelEigenmaps(3, n_neighbors=20).fit(Z3)
+    assert np.array_equal(a.embedding_, b.embedding_)
+
+
 def test_transform_reproduces_training_embedding_and_is_samplewise(roll1000):
     Z, _, _, g = roll1000
     Y = g.transform(Z)
