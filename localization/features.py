@@ -153,23 +153,27 @@ def fit_pca(x: np.ndarray, n_components: int, whiten: bool, random_state: int | 
 class FeatureExtractor(TransformerMixin, BaseEstimator):
     """Base class: input validation, fitted check, image-size check, state (de)serialisation.
 
-    Subclasses implement ``_fit(images)``, ``_transform(images) -> (n, m) float64``,
+    Subclasses implement ``_fit(images, y)``, ``_transform(images) -> (n, m) float64``,
     ``_state_arrays()`` and ``_load_arrays(state)``; ``name`` is the ``make_features`` key.
     """
 
     name: ClassVar[str] = ""
 
     def fit(self, images: np.ndarray, y: Any = None) -> FeatureExtractor:
-        """Fit on uint8 images (n, H, W, 3); remembers (H, W) in ``image_shape_``."""
+        """Fit on uint8 images (n, H, W, 3); remembers (H, W) in ``image_shape_``.
+
+        ``y`` (poses (n, 3)) is ignored except by ``SmallCNNFeatures`` trained with
+        ``objective="pose_contrastive"``.
+        """
         images = check_images(images)
-        self._fit(images)
+        self._fit(images, y)
         self.image_shape_ = (int(images.shape[1]), int(images.shape[2]))
         return self
 
     def fit_transform(self, images: np.ndarray, y: Any = None) -> np.ndarray:
         """``fit(images).transform(images)``, reusing network outputs computed during fit."""
         images = check_images(images)
-        out = self._fit(images)
+        out = self._fit(images, y)
         self.image_shape_ = (int(images.shape[1]), int(images.shape[2]))
         return self.transform(images) if out is None else self._checked(out)
 
@@ -221,7 +225,7 @@ class FeatureExtractor(TransformerMixin, BaseEstimator):
         return self._n_out()
 
     # -- subclass hooks ------------------------------------------------------------------------
-    def _fit(self, images: np.ndarray) -> np.ndarray | None:
+    def _fit(self, images: np.ndarray, y: Any = None) -> np.ndarray | None:
         """Fit; may return the transform of ``images`` if it was computed on the way."""
         raise NotImplementedError
 
@@ -275,7 +279,7 @@ class PixelPCA(FeatureExtractor):
             x = x @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
         return x.reshape(len(x), -1)
 
-    def _fit(self, images: np.ndarray) -> None:
+    def _fit(self, images: np.ndarray, y: Any = None) -> None:
         if int(self.n_components) < 1:
             raise ValueError(f"n_components must be >= 1, got {self.n_components}")
         self.pca_ = fit_pca(self._pixels(images), self.n_components, self.whiten,
@@ -363,7 +367,7 @@ class EfficientNetFeatures(FeatureExtractor):
                 out[sl] = model.features(x).double().numpy()
         return out
 
-    def _fit(self, images: np.ndarray) -> np.ndarray | None:
+    def _fit(self, images: np.ndarray, y: Any = None) -> np.ndarray | None:
         if int(self.input_size) < 32:
             raise ValueError(f"input_size must be >= 32, got {self.input_size}")
         self.weights_sha256_ = _file_sha256(enet.weights_path())

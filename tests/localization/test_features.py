@@ -237,3 +237,6 @@ def test_pose_contrastive_training(images):
     assert len(model.loss_history) == 2 and np.all(np.isfinite(model.loss_history))
     with pytest.raises(ValueError, match="needs poses"):
         SmallCNNFeatures(objective="pose_contrastive", epochs=1, progress=False).fit(images)
+    ext = SmallCNNFeatures(4, objective="pose_contrastive", epochs=1, embedding_dim=8, width=8,
+                           batch_size=16, progress=False).fit(images, poses)
+    assert ext.transform(images[:2]).shape == (2, 4)
