@@ -27,6 +27,8 @@ _LANDMARK_COLOURS = np.array(
     [[0.9, 0.1, 0.1], [0.1, 0.3, 0.95], [0.95, 0.85, 0.1], [0.1, 0.8, 0.2], [0.8, 0.1, 0.8]]
 )
 GROUND_PIXELS = 1024  # floor texture side
+HORIZON_PIXELS = (512, 256)  # horizon wall texture (width, height)
+HORIZON_HEIGHT = 40.0  # m
 # horizon walls: distinct colours per side so heading is visible from far away
 _HORIZON = {"E": (0.85, 0.55, 0.35), "N": (0.45, 0.6, 0.85), "W": (0.55, 0.8, 0.55), "S": (0.8, 0.75, 0.5)}
 
@@ -62,8 +64,9 @@ class City:
     street_centers : (k,) float — coordinates of the street centrelines (same on x and y).
     buildings : list of Building — the collidable buildings inside the city.
     seed : int — the generating seed.
-    skyline : list of Building — visual-only towers outside the city (beyond the boundary
-        walls) so that views out of the city still differ from place to place.
+    skyline : list of Building — towers outside the city, painted onto the horizon walls
+        (as seen from the city centre) so views out of the city differ from place to place
+        and direction to direction at no extra draw calls.
     """
 
     size: float
@@ -181,9 +184,9 @@ class City:
         """Return a MuJoCo MJCF document for the city (plus optional robot parts).
 
         The collidable buildings and the invisible boundary walls are geoms of the static
-        body ``"city"`` (so a contact sensor can watch them); floor, skyline and horizon walls
-        are visual-only world geoms. The floor texture is a placeholder until
-        :meth:`paint_textures` is applied to the compiled model.
+        body ``"city"`` (so a contact sensor can watch them); floor and horizon walls are
+        visual-only world geoms whose textures are placeholders until :meth:`paint_textures`
+        is applied to the compiled model.
 
         Parameters
         ----------
@@ -261,13 +264,48 @@ class City:
                                | ((dy <= hw) & (dx <= hw + 0.6) & zebra_y))] = (0.92, 0.92, 0.92)
         return (img * 255).astype(np.uint8)
 
+    def horizon_image(self, side: str, width: int = 512, height: int = 256) -> NDArray[np.uint8]:
+        """Paint the horizon wall on ``side`` ("E", "N", "W", "S") as seen from inside the city.
+
+        Returns (height, width, 3) uint8; row 0 is the wall top (``HORIZON_HEIGHT`` m), column 0
+        the left end as seen looking out. A sky gradient to the side's colour, and the
+        :attr:`skyline` towers of that side drawn as seen from the city centre (scaled by
+        wall distance / tower distance), far ones first, with lit window dots.
+        """
+        far = self.floor_half() - 2.0
+        axis, sign = {"E": (0, 1), "N": (1, 1), "W": (0, -1), "S": (1, -1)}[side]
+        left = {"E": 1, "N": -1, "W": -1, "S": 1}[side]  # along-wall coordinate increasing to the left
+        z = HORIZON_HEIGHT * (1.0 - (np.arange(height) + 0.5) / height)[:, None, None]
+        t = np.clip(z / 12.0, 0.0, 1.0)
+        img = (1 - t) * np.asarray(_HORIZON[side]) + t * np.array([0.93, 0.96, 1.0]) + np.zeros((1, width, 3))
+        col = (far - left * (-far + (np.arange(width) + 0.5) * 2 * far / width))[None, :]  # left-to-right
+        along = far - col  # along-wall coordinate of each column, in the "left" orientation
+        mine = [b for b in self.skyline if sign * b.center[axis] > self.half]
+        for b in sorted(mine, key=lambda b: -abs(b.center[axis])):
+            k = far / abs(b.center[axis])
+            a, w, hz = left * b.center[1 - axis] * k, b.half_size[1 - axis] * k, 2 * b.half_size[2] * k
+            body = (np.abs(along - a) <= w) & (z[..., 0] <= hz)
+            img[body] = b.rgb
+            lit = body & (np.mod(z[..., 0], 1.2) < 0.5) & (np.mod(along - a, 0.9) < 0.4)
+            img[lit] = np.clip(np.asarray(b.window_rgb) + 0.35, 0, 1)
+        return (img * 255).astype(np.uint8)
+
     def paint_textures(self, model: mujoco.MjModel) -> None:  # noqa: F821
-        """Write :meth:`ground_image` into the compiled model's floor texture (before any renderer exists)."""
+        """Write :meth:`ground_image` and :meth:`horizon_image` into the compiled model's textures.
+
+        Call before any renderer is created for the model (textures are uploaded then).
+        """
         import mujoco
 
-        tid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXTURE, "ground")
-        a, h, w, c = model.tex_adr[tid], model.tex_height[tid], model.tex_width[tid], model.tex_nchannel[tid]
-        model.tex_data[a : a + h * w * c] = self.ground_image(h)[..., :c].reshape(-1)
+        def paint(name: str, image: NDArray[np.uint8]) -> None:
+            tid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXTURE, name)
+            a, h, w, c = model.tex_adr[tid], model.tex_height[tid], model.tex_width[tid], model.tex_nchannel[tid]
+            model.tex_data[a : a + h * w * c] = image[:h, :w, :c].reshape(-1)
+
+        paint("ground", self.ground_image(GROUND_PIXELS))
+        for side in "ENWS":  # MuJoCo maps the inner faces of the W and N walls mirrored
+            image = self.horizon_image(side, *HORIZON_PIXELS)
+            paint(f"sky{side}", image[:, ::-1] if side in "WN" else image)
 
     def _obstacles_xml(self) -> tuple[list[str], list[str]]:
         """Assets and geoms of the collidable buildings and invisible boundary walls."""
@@ -293,7 +331,7 @@ class City:
         return assets, geoms
 
     def _scenery_xml(self, far: float) -> tuple[list[str], list[str]]:
-        """Assets and visual-only geoms: floor (painted by :meth:`paint_textures`), skyline, horizon."""
+        """Assets and visual-only geoms: floor and horizon walls (painted by :meth:`paint_textures`)."""
         f = far + 2.0
         assets = [
             (f'<texture name="ground" type="2d" builtin="flat" width="{GROUND_PIXELS}" '
@@ -303,21 +341,17 @@ class City:
         # a plane's third size is its rendering grid spacing: one big cell draws fastest
         geoms = [(f'<geom name="floor" type="plane" size="{f:.3f} {f:.3f} {f:.3f}" material="ground" '
                   'contype="1" conaffinity="1" group="0"/>')]
-        for i, b in enumerate(self.skyline):
-            geoms.append(
-                f'<geom name="skyline{i}" type="box" pos="{_fmt(b.center)}" size="{_fmt(b.half_size)}" '
-                f'rgba="{_fmt(b.rgb)} 1" contype="0" conaffinity="0" group="2"/>'
-            )
+        zc = 0.5 * HORIZON_HEIGHT
         for name, (x, y, hx, hy) in {
             "E": (far, 0, 0.5, far), "W": (-far, 0, 0.5, far), "N": (0, far, far, 0.5), "S": (0, -far, far, 0.5)
         }.items():
             assets.append(
-                f'<texture name="sky{name}" type="2d" builtin="gradient" width="64" height="64" '
-                f'rgb1="0.95 0.97 1.0" rgb2="{_fmt(_HORIZON[name])}"/>'
+                f'<texture name="sky{name}" type="2d" builtin="flat" width="{HORIZON_PIXELS[0]}" '
+                f'height="{HORIZON_PIXELS[1]}" rgb1="{_fmt(_HORIZON[name])}"/>'
             )
             assets.append(f'<material name="sky{name}" texture="sky{name}" texrepeat="1 1"/>')
             geoms.append(
-                f'<geom name="horizon{name}" type="box" pos="{x} {y} 20" size="{hx} {hy} 20" '
+                f'<geom name="horizon{name}" type="box" pos="{x} {y} {zc}" size="{hx} {hy} {zc}" '
                 f'material="sky{name}" contype="0" conaffinity="0" group="2"/>'
             )
         return assets, geoms
@@ -420,17 +454,17 @@ def generate_city(
                 buildings=buildings, seed=int(seed), skyline=skyline)
 
 
-def _skyline(rng: np.random.Generator, half: float, per_side: int = 5) -> list[Building]:
-    """Visual-only towers 2-9 m outside each side of the city, of random size and colour."""
+def _skyline(rng: np.random.Generator, half: float, per_side: int = 10) -> list[Building]:
+    """Towers 2-9 m outside each side of the city, of random size and colour (painted on the horizon)."""
     out = []
     for side in range(4):
         along = np.sort(rng.uniform(-half - 4.0, half + 4.0, per_side))
         for a in along:
             d = half + rng.uniform(2.0, 9.0)
-            w, depth, height = rng.uniform(0.8, 2.5), rng.uniform(0.8, 2.5), rng.uniform(2.0, 12.0)
+            w, depth, height = rng.uniform(1.0, 4.0), rng.uniform(0.8, 2.5), rng.uniform(2.0, 12.0)
             x, y, hx, hy = [(d, a, depth, w), (a, d, w, depth), (-d, a, depth, w), (a, -d, w, depth)][side]
             rgb = _random_colour(rng) * rng.uniform(0.6, 1.0)
-            out.append(Building((x, y, 0.5 * height), (0.5 * hx, 0.5 * hy, 0.5 * height), tuple(rgb), tuple(rgb)))
+            out.append(Building((x, y, 0.5 * height), (0.5 * hx, 0.5 * hy, 0.5 * height), tuple(rgb), tuple(rgb * 0.5)))
     return out
 
 
