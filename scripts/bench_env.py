@@ -207,7 +207,7 @@ def markdown(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     args = parse_args(argv)
     sizes = [int(s) for s in args.sizes.split(",")]
-    cameras = sorted(envs.CAMERAS) if args.cameras else ["perspective"]
+    cameras = ["perspective"] + (sorted(set(envs.CAMERAS) - {"perspective"}) if args.cameras else [])
     probe = envs.AppearanceNavEnv(scene_seed=args.scene_seed)
     meta = {"args": dataclasses.asdict(args), "dt": probe.dt, "frame_skip": probe.frame_skip,
             "steps": args.steps, "chunk": args.chunk, "gl_renderer": gl_renderer(),
