@@ -188,7 +188,7 @@ def markdown(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
         (f"Random policy, dt = {meta['dt']} s ({meta['frame_skip']} physics steps per env step). env and raw "
          f"alternate in chunks of {meta['chunk']} steps, {meta['steps']} steps each; steps/s = median over "
          f"chunks (best chunk in brackets), env/raw = median of per-chunk ratios. GL: {meta['gl_renderer']}, "
-         f"MUJOCO_GL={meta['mujoco_gl']}, {meta['cpu_count']} CPUs, load average at start {meta['loadavg']}, "
+         f"MUJOCO_GL={meta['mujoco_gl']}, LP_NUM_THREADS={meta['lp_num_threads']}, {meta['cpu_count']} CPUs, load average at start {meta['loadavg']}, "
          f"at end {meta['loadavg_end']}."),
         "",
         "| camera | image | env steps/s | raw step+render/s | env/raw | >= 1000/s | >= 0.8x |",
@@ -211,7 +211,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     probe = envs.AppearanceNavEnv(scene_seed=args.scene_seed)
     meta = {"args": dataclasses.asdict(args), "dt": probe.dt, "frame_skip": probe.frame_skip,
             "steps": args.steps, "chunk": args.chunk, "gl_renderer": gl_renderer(),
-            "mujoco_gl": os.environ.get("MUJOCO_GL"), "mujoco": mujoco.__version__,
+            "mujoco_gl": os.environ.get("MUJOCO_GL"), "lp_num_threads": os.environ.get("LP_NUM_THREADS"),
+            "mujoco": mujoco.__version__,
             "python": platform.python_version(), "cpu_count": os.cpu_count(),
             "loadavg": [round(v, 2) for v in os.getloadavg()]}
     probe.close()
