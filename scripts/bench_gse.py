@@ -11,14 +11,14 @@ What is measured
   ``regression_manifold(n, dim_theta=3, m)`` (x, y in [0,1]^2, periodic yaw), wall-clock
   ``GSERegressor(periodic=(2,)).fit`` time (after an untimed warm-up fit on 150 points,
   so lazy imports are not counted; it also masks the memory of fits with n <= 150), and
-  peak memory of the fit as the growth of the process's peak resident set size, ``ru_maxrss`` after fit minus before fit (Linux,
-  KiB -> MiB). It includes BLAS/LAPACK workspace and freed temporaries, unlike
+  peak memory of the fit as the growth of the process's peak resident set size,
+  ``ru_maxrss`` after fit minus before fit (Linux, KiB -> MiB). It includes BLAS/LAPACK workspace and freed temporaries, unlike
   tracemalloc (which only sees allocations made through Python / numpy and slows the
   fit); ``--tracemalloc`` adds a second, traced fit and reports its numpy-level peak too.
 * Latency at each n: ``predict`` (w -> theta) and ``predict_features`` (theta -> w) for
   one point (median of ``latency_repeats`` calls after a warm-up) and for a batch of
   ``batch_size`` held-out points (median of 3). Single queries are timed twice: with the
-  inherited BLAS/OpenMP threads and inside ``threadpool_limits(1)``: a one-row query is
+  worker's BLAS/OpenMP threads (``--threads``) and inside ``threadpool_limits(1)``: a one-row query is
   a GEMV that multi-threaded OpenBLAS splits for large n, and on a loaded machine the
   thread hand-off costs ~10 ms (seen at n = 10000 on a shared 2-core box).
 * Growth exponent: least-squares slope of log(fit time) vs log(n).
@@ -329,7 +329,8 @@ def markdown(args: Args, res: dict[str, Any]) -> str:
              f"{args.threads or 'inherited'}; memory = peak RSS growth during fit (ru_maxrss)."), ""]
     if res["scaling"]:
         lines += ["## Fit time, memory and latency vs n (dim_theta = 3)", "",
-                  "Single-query latency: inherited BLAS threads / 1 thread.", "",
+                  (f"Single-query latency: worker BLAS threads "
+                   f"({args.threads or 'inherited'}) / 1 thread."), "",
                   ("| n | fit (s) | peak RSS +MiB | predict 1 (ms) | predict_features 1 (ms) | "
                    f"predict {args.batch_size} (ms) | predict_features {args.batch_size} (ms) |"),
                   "|---|---|---|---|---|---|---|"]
