@@ -437,7 +437,8 @@ class RetrievalRegressor(_PoseRegressorBase):
             n_fit = n - int(np.ceil(n / self.cv))
             ks = sorted({int(k) for k in self.k_grid if 1 <= int(k) <= n_fit})
             if not ks:
-                raise ValueError(f"no k in k_grid={tuple(self.k_grid)} fits {n_fit} samples per fold")
+                raise ValueError(f"no k in k_grid={tuple(self.k_grid)} fits {n_fit} samples "
+                                 "per fold")
             search = GridSearchCV(KNeighborsRegressor(weights=self.weights,
                                                       algorithm=self.algorithm),
                                   {"n_neighbors": ks}, scoring="neg_mean_squared_error",

@@ -12,15 +12,17 @@ What is measured
   ``GSERegressor(periodic=(2,)).fit`` time (after an untimed warm-up fit on 150 points,
   so lazy imports are not counted; it also masks the memory of fits with n <= 150), and
   peak memory of the fit as the growth of the process's peak resident set size,
-  ``ru_maxrss`` after fit minus before fit (Linux, KiB -> MiB). It includes BLAS/LAPACK workspace and freed temporaries, unlike
-  tracemalloc (which only sees allocations made through Python / numpy and slows the
-  fit); ``--tracemalloc`` adds a second, traced fit and reports its numpy-level peak too.
+  ``ru_maxrss`` after fit minus before fit (Linux, KiB -> MiB). It includes BLAS/LAPACK
+  workspace and freed temporaries, unlike tracemalloc (which only sees allocations made
+  through Python / numpy and slows the fit); ``--tracemalloc`` adds a second, traced fit
+  and reports its numpy-level peak too.
 * Latency at each n: ``predict`` (w -> theta) and ``predict_features`` (theta -> w) for
   one point (median of ``latency_repeats`` calls after a warm-up) and for a batch of
   ``batch_size`` held-out points (median of 3). Single queries are timed twice: with the
-  worker's BLAS/OpenMP threads (``--threads``) and inside ``threadpool_limits(1)``: a one-row query is
-  a GEMV that multi-threaded OpenBLAS splits for large n, and on a loaded machine the
-  thread hand-off costs ~10 ms (seen at n = 10000 on a shared 2-core box).
+  worker's BLAS/OpenMP threads (``--threads``) and inside ``threadpool_limits(1)``: a
+  one-row query is a GEMV that multi-threaded OpenBLAS splits for large n, and on a
+  loaded machine the thread hand-off costs ~10 ms (seen at n = 10000 on a shared
+  2-core box).
 * Growth exponent: least-squares slope of log(fit time) vs log(n).
 * Accuracy (in this process): train ``accuracy_n_train`` / test ``accuracy_n_test`` samples
   (70/30 of 2500 as in the seed paper) of ``regression_manifold`` with dim_theta = 2 and 3
@@ -198,7 +200,8 @@ def run_scaling(args: Args) -> list[dict[str, Any]]:
                 cmd.append("--tracemalloc")
             print(f"[scaling] n = {n} ...", flush=True)
             try:
-                proc = subprocess.run(cmd, check=False, env=env, cwd=ROOT, capture_output=True, text=True,
+                proc = subprocess.run(cmd, check=False, env=env, cwd=ROOT,
+                                      capture_output=True, text=True,
                                       timeout=args.timeout)
                 if proc.returncode != 0 or not out.exists():
                     err = (proc.stderr or "").strip().splitlines()[-3:]
@@ -326,7 +329,8 @@ def markdown(args: Args, res: dict[str, Any]) -> str:
     lines = [f"# GSE benchmark ({'quick' if args.quick else 'full'} run, {res['meta']['date']})",
              "", (f"Synthetic regression manifold, m = {args.m}, GSE n_neighbors = "
              f"{args.n_neighbors}; {res['meta']['cpu_count']} CPUs, threads = "
-             f"{args.threads or 'inherited'}; memory = peak RSS growth during fit (ru_maxrss)."), ""]
+             f"{args.threads or 'inherited'}; memory = peak RSS growth during fit "
+             "(ru_maxrss)."), ""]
     if res["scaling"]:
         lines += ["## Fit time, memory and latency vs n (dim_theta = 3)", "",
                   (f"Single-query latency: worker BLAS threads "
