@@ -33,7 +33,7 @@ test: setup
 	$(RUN) -m pytest -n 2 -q
 
 bench: setup
-	$(RUN) scripts/bench_env.py
+	$(RUN) scripts/bench_env.py --cameras
 	$(RUN) scripts/bench_gse.py
 
 clean:
