@@ -1,0 +1,123 @@
+"""The RL agent's observation: the plan to the goal as seen from the believed pose.
+
+A pose-belief observation ``Dict(pose_mean, pose_cov, goal)`` is turned into what a policy
+needs to drive, all in the belief's body frame (x forward, y left) so the policy need not
+learn the geometry of headings:
+
+- ``waypoints`` (2 * len(lookaheads),): points of the planned street path (the
+  :class:`agents.scripted.Navigator`, the same plan the scripted agent follows) ``lookaheads``
+  metres ahead of the believed progress, in units of 2 m;
+- ``goal`` (2,): the goal, in units of 10 m;
+- ``uncertainty`` (3,): the belief's standard deviations of x, y (m) and yaw (rad).
+
+Values are clipped to their Box. The true pose is never used.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+
+from agents.scripted import Navigator, check_belief_observation
+
+__all__ = ["NavigationFeatures", "NavigationObservation"]
+
+_TRIU = np.triu_indices(3)
+_DIAG = [int(np.flatnonzero((_TRIU[0] == i) & (_TRIU[1] == i))[0]) for i in range(3)]
+WAYPOINT_UNIT = 2.0  # m
+GOAL_UNIT = 10.0  # m
+LIMIT = 5.0  # Box bound of the scaled positions
+STD_LIMIT = 10.0  # Box bound of the standard deviations
+
+
+def to_body_frame(points: NDArray[np.float64], pose: NDArray[np.float64]) -> NDArray[np.float64]:
+    """World points (k, 2) in the frame of ``pose`` [x, y, yaw] (x forward, y left)."""
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    d = points - pose[:2]
+    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+
+
+class NavigationFeatures:
+    """Stateful map from belief observations to the policy's observation (see the module doc).
+
+    Parameters
+    ----------
+    city : envs.scene.City — the map.
+    lookaheads : tuple of float — distances (m) ahead along the plan of the waypoints.
+    replan_distance : float — see :class:`agents.scripted.Navigator`.
+    """
+
+    def __init__(self, city: Any, lookaheads: tuple[float, ...] = (0.5, 1.0, 2.0),
+                 replan_distance: float = 1.0) -> None:
+        if not lookaheads or min(lookaheads) <= 0:
+            raise ValueError(f"lookaheads must be positive distances, got {lookaheads}")
+        self.lookaheads = tuple(float(d) for d in lookaheads)
+        self.navigator = Navigator(city, replan_distance)
+        self.observation_space = self.space(self.lookaheads)
+
+    @staticmethod
+    def space(lookaheads: tuple[float, ...]) -> spaces.Dict:
+        """The observation space for these lookaheads."""
+        return spaces.Dict({
+            "waypoints": spaces.Box(-LIMIT, LIMIT, (2 * len(lookaheads),), np.float32),
+            "goal": spaces.Box(-LIMIT, LIMIT, (2,), np.float32),
+            "uncertainty": spaces.Box(0.0, STD_LIMIT, (3,), np.float32),
+        })
+
+    def reset(self) -> None:
+        """Forget the plan (call at episode starts)."""
+        self.navigator.reset()
+
+    def __call__(self, obs: Mapping[str, Any]) -> dict[str, NDArray[np.float32]]:
+        """The policy observation for one belief observation."""
+        mean, cov, goal = check_belief_observation(obs)
+        path = self.navigator.update(mean[:2], goal)
+        ahead = np.array([path.ahead(d) for d in self.lookaheads])
+        std = np.sqrt(np.clip(cov[_DIAG], 0.0, None))
+        return {
+            "waypoints": np.clip(to_body_frame(ahead, mean).ravel() / WAYPOINT_UNIT,
+                                 -LIMIT, LIMIT).astype(np.float32),
+            "goal": np.clip(to_body_frame(goal[None], mean)[0] / GOAL_UNIT,
+                            -LIMIT, LIMIT).astype(np.float32),
+            "uncertainty": np.clip(std, 0.0, STD_LIMIT).astype(np.float32),
+        }
+
+
+class NavigationObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
+    """Replace a belief observation by :class:`NavigationFeatures` (for RL policies).
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        An env whose observations are pose beliefs (``localization.wrappers``).
+    lookaheads, replan_distance
+        See :class:`NavigationFeatures`. The map is ``env.unwrapped.city``.
+    """
+
+    def __init__(self, env: gym.Env, lookaheads: tuple[float, ...] = (0.5, 1.0, 2.0),
+                 replan_distance: float = 1.0) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, lookaheads=lookaheads,
+                                                 replan_distance=replan_distance)
+        gym.ObservationWrapper.__init__(self, env)
+        space = env.observation_space
+        if not isinstance(space, spaces.Dict) or not {"pose_mean", "pose_cov", "goal"} <= set(
+                space.spaces):
+            raise ValueError("NavigationObservation needs a belief observation space with keys "
+                             f"pose_mean, pose_cov, goal; got {space}")
+        self.features = NavigationFeatures(env.unwrapped.city, lookaheads, replan_distance)
+        self.observation_space = self.features.observation_space
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None,
+              ) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
+        """Reset the env and forget the plan."""
+        self.features.reset()
+        return super().reset(seed=seed, options=options)
+
+    def observation(self, observation: Mapping[str, Any]) -> dict[str, NDArray[np.float32]]:
+        """The policy observation for the belief observation."""
+        return self.features(observation)

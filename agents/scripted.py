@@ -1,0 +1,153 @@
+"""A scripted navigator: plan over the street graph, follow with pure pursuit on the belief.
+
+The robot knows the map (the city's street graph) but not its pose: every decision uses the
+belief mean ``obs["pose_mean"]`` of a pose-belief observation
+``Dict(pose_mean=(3,), pose_cov=(6,), goal=(2,))`` (``localization.wrappers``: the GSE belief,
+dead reckoning or the oracle). The agent never sees the true pose.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from agents.planner import PlannedPath, StreetPlanner
+
+__all__ = ["BELIEF_KEYS", "Navigator", "ScriptedAgent", "check_belief_observation",
+           "pure_pursuit"]
+
+Array = NDArray[np.float64]
+BELIEF_KEYS = ("pose_mean", "pose_cov", "goal")
+
+
+def check_belief_observation(obs: Any) -> tuple[Array, Array, Array]:
+    """Validate a belief observation; return (pose_mean (3,), pose_cov (6,), goal (2,)) float64.
+
+    Raises
+    ------
+    TypeError
+        If ``obs`` is not a mapping.
+    ValueError
+        If ``obs`` lacks the belief keys (e.g. the raw image observation of an unwrapped env),
+        or a value has the wrong shape or is not finite.
+    """
+    if not isinstance(obs, Mapping):
+        raise TypeError(f"expected a belief observation dict with keys {list(BELIEF_KEYS)}, "
+                         f"got {type(obs).__name__}")
+    missing = [k for k in BELIEF_KEYS if k not in obs]
+    if missing:
+        raise ValueError(
+            f"the observation lacks the belief keys {missing} (it has {sorted(obs)}): wrap the env "
+            "in a pose source from localization.wrappers (BeliefWrapper, DeadReckoningWrapper or "
+            "OracleWrapper) before giving its observations to an agent")
+    out = []
+    for key, size in zip(BELIEF_KEYS, (3, 6, 2)):
+        v = np.asarray(obs[key], dtype=np.float64)
+        if v.shape != (size,):
+            raise ValueError(f"obs[{key!r}] must have shape ({size},), got {v.shape}")
+        if not np.all(np.isfinite(v)):
+            raise ValueError(f"obs[{key!r}] contains NaN or inf: {v}")
+        out.append(v)
+    return out[0], out[1], out[2]
+
+
+def _wrap(a: float) -> float:
+    return float(np.pi - np.mod(np.pi - a, 2.0 * np.pi))
+
+
+def pure_pursuit(pose: Array, carrot: Array, remaining: float, speed: float, w_max: float,
+                 turn_in_place: float) -> Array:
+    """Pure-pursuit control U = [v, w] (2,) steering the pose [x, y, yaw] towards ``carrot``.
+
+    Turns on the spot when the carrot is more than ``turn_in_place`` rad off the heading (the
+    streets are narrow); slows down over the last metre (``remaining`` m to the goal).
+    """
+    dx, dy = carrot[0] - pose[0], carrot[1] - pose[1]
+    alpha = _wrap(np.arctan2(dy, dx) - pose[2])
+    if abs(alpha) > turn_in_place:
+        return np.array([0.0, np.copysign(w_max, alpha)])
+    v = speed * np.cos(alpha) * min(1.0, 0.5 + remaining)
+    w = np.clip(2.0 * max(v, 0.2) * np.sin(alpha) / max(np.hypot(dx, dy), 0.2), -w_max, w_max)
+    return np.array([v, w])
+
+
+class Navigator:
+    """The plan to the current goal and the progress along it, from belief means.
+
+    A new goal starts a new plan; the plan is also redone from the belief mean when the mean is
+    farther than ``replan_distance`` from it (after a belief correction, say).
+
+    Parameters
+    ----------
+    city : envs.scene.City — the map.
+    replan_distance : float — metres off the path that trigger a new plan.
+    """
+
+    def __init__(self, city: Any, replan_distance: float = 1.0) -> None:
+        self.planner = StreetPlanner(city)
+        self.replan_distance = replan_distance
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the plan."""
+        self.goal: Array | None = None
+        self.path: PlannedPath | None = None
+        self.replans = 0
+
+    def update(self, xy: Array, goal: Array) -> PlannedPath:
+        """Plan (or replan) as needed for the believed position ``xy`` and advance the progress."""
+        new_goal = self.goal is None or not np.allclose(goal, self.goal)
+        if new_goal or self.path.distance_to(xy) > self.replan_distance:
+            self.replans += not new_goal
+            self.goal = np.array(goal, dtype=np.float64)
+            self.path = PlannedPath(self.planner.plan(xy, goal))
+        self.path.update(xy)
+        return self.path
+
+
+class ScriptedAgent:
+    """Plan a street path to the goal and follow it with pure pursuit on the belief mean.
+
+    Parameters
+    ----------
+    city : envs.scene.City
+        The map (``env.unwrapped.city``).
+    lookahead : float — carrot distance (m) along the path.
+    speed : float — cruise speed command (m/s).
+    w_max : float — bound on the angular velocity command (rad/s).
+    turn_in_place : float — heading error (rad) above which the robot turns on the spot.
+    replan_distance : float — see :class:`Navigator`.
+
+    Notes
+    -----
+    ``act(obs)`` takes one belief observation (keys ``pose_mean``, ``pose_cov``, ``goal``) and
+    returns the action U = [v, w] (float32, inside the env's action Box). Call :meth:`reset`
+    between episodes (a new goal also starts a new plan).
+    """
+
+    def __init__(self, city: Any, lookahead: float = 0.6, speed: float = 0.9, w_max: float = 1.0,
+                 turn_in_place: float = 0.6, replan_distance: float = 1.0) -> None:
+        self.navigator = Navigator(city, replan_distance)
+        self.lookahead, self.speed, self.w_max = lookahead, speed, w_max
+        self.turn_in_place = turn_in_place
+
+    def reset(self) -> None:
+        """Forget the current plan."""
+        self.navigator.reset()
+
+    @property
+    def path(self) -> Array | None:
+        """The current plan (p, 2) resampled every 5 cm, or None before the first action."""
+        path = self.navigator.path
+        return None if path is None else path.points
+
+    def act(self, obs: Mapping[str, Any]) -> NDArray[np.float32]:
+        """The action U = [v, w] for one belief observation."""
+        mean, _, goal = check_belief_observation(obs)
+        path = self.navigator.update(mean[:2], goal)
+        u = pure_pursuit(mean, path.ahead(self.lookahead), path.remaining(), self.speed,
+                         self.w_max, self.turn_in_place)
+        return u.astype(np.float32)

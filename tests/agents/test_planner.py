@@ -1,0 +1,93 @@
+"""Street planner: shortest street paths, projections, progress along a plan."""
+
+import numpy as np
+import pytest
+
+from agents.planner import PlannedPath, StreetPlanner, path_length, project_to_segments
+from envs.scene import generate_city
+
+
+@pytest.fixture(scope="module")
+def city():
+    return generate_city(0)
+
+
+def _on_street(city, points, tol=1e-9):
+    c = city.street_centers
+    near = lambda v: np.min(np.abs(v[:, None] - c[None]), axis=1) <= tol
+    return near(points[:, 0]) | near(points[:, 1])
+
+
+def test_project_to_segments():
+    a = np.array([[0.0, 0.0], [0.0, 0.0]])
+    b = np.array([[2.0, 0.0], [0.0, 2.0]])
+    t, foot, d = project_to_segments(np.array([1.0, 1.0]), a, b)
+    np.testing.assert_allclose(t, [0.5, 0.5])
+    np.testing.assert_allclose(foot, [[1, 0], [0, 1]])
+    np.testing.assert_allclose(d, [1, 1])
+    t, _, d = project_to_segments(np.array([3.0, 0.0]), a, b)
+    assert t[0] == 1.0 and d[0] == 1.0
+
+
+def test_plan_is_shortest_manhattan_path_on_streets(city):
+    planner = StreetPlanner(city)
+    c = city.street_centers
+    start, goal = np.array([c[0], c[0]]), np.array([c[-1], c[-1]])
+    path = planner.plan(start, goal)
+    np.testing.assert_allclose(path[0], start)
+    np.testing.assert_allclose(path[-1], goal)
+    assert _on_street(city, path).all()
+    assert path_length(path) == pytest.approx(2 * (c[-1] - c[0]))  # Manhattan distance
+    # every leg runs along one street (axis-aligned)
+    assert np.all(np.min(np.abs(np.diff(path, axis=0)), axis=1) < 1e-9)
+
+
+def test_plan_between_points_off_the_nodes(city):
+    planner = StreetPlanner(city)
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        s, g = city.random_street_point(rng), city.random_street_point(rng)
+        path = planner.plan(s, g)
+        assert _on_street(city, path).all()
+        # the street distance is at least the Manhattan distance and at most a detour of two blocks
+        manhattan = np.abs(s - g).sum()
+        assert manhattan - 1e-9 <= path_length(path) <= manhattan + 4 * (city.street_centers[1] - city.street_centers[0])
+        assert city.free_mask(np.linspace(path[:-1], path[1:], 20).reshape(-1, 2), 0.3).all()
+
+
+def test_same_segment_is_direct(city):
+    planner = StreetPlanner(city)
+    c = city.street_centers
+    s, g = np.array([c[0] + 0.5, c[1]]), np.array([c[0] + 3.0, c[1]])
+    np.testing.assert_allclose(planner.plan(s, g), [s, g])
+
+
+def test_start_off_the_street_joins_its_nearest_street(city):
+    planner = StreetPlanner(city)
+    c = city.street_centers
+    start = np.array([c[0] + 0.6, c[1] + 2.5])  # on the street's side, not on the centreline
+    path = planner.plan(start, np.array([c[-1], c[-1]]))
+    np.testing.assert_allclose(path[0], start)
+    np.testing.assert_allclose(path[1], [c[0], c[1] + 2.5])
+
+
+def test_bad_points_raise(city):
+    planner = StreetPlanner(city)
+    with pytest.raises(ValueError, match="finite"):
+        planner.plan([np.nan, 0.0], [0.0, 0.0])
+    with pytest.raises(ValueError, match="finite"):
+        planner.plan([0.0], [0.0, 0.0])
+
+
+def test_planned_path_progress():
+    path = PlannedPath([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]], step=0.1)
+    assert path.remaining() == pytest.approx(4.0)
+    path.update(np.array([1.0, 0.2]))
+    assert path.remaining() == pytest.approx(3.0)
+    np.testing.assert_allclose(path.ahead(1.5), [2.0, 0.5])
+    np.testing.assert_allclose(path.ahead(100.0), [2.0, 2.0])
+    assert path.distance_to(np.array([1.0, 0.2])) == pytest.approx(0.2)
+    path.update(np.array([0.0, 0.0]))  # progress never goes back
+    assert path.remaining() == pytest.approx(3.0)
+    with pytest.raises(ValueError, match="shape"):
+        PlannedPath(np.zeros((3, 3)))

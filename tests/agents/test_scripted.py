@@ -1,0 +1,83 @@
+"""Scripted agent and navigation features on hand-made belief observations."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import envs  # noqa: F401  (registers the env)
+from agents.observations import NavigationFeatures, to_body_frame
+from agents.scripted import ScriptedAgent, check_belief_observation, pure_pursuit
+
+TINY_COV = np.array([1e-4, 0, 0, 1e-4, 0, 1e-4])
+
+
+def _belief(pose, goal, cov=TINY_COV):
+    return {"pose_mean": np.asarray(pose, np.float32), "pose_cov": np.asarray(cov, np.float32),
+            "goal": np.asarray(goal, np.float32)}
+
+
+def test_scripted_agent_reaches_goals_on_the_true_pose():
+    env = gym.make("AppearanceNav-v0", scene_seed=0, motion_noise=0.05, max_episode_steps=500)
+    agent = ScriptedAgent(env.unwrapped.city)
+    successes, collisions = 0, 0
+    for ep in range(8):
+        obs, info = env.reset(seed=100 + ep)
+        agent.reset()
+        for _ in range(500):
+            action = agent.act(_belief(info["pose"], obs["goal"]))
+            assert action.dtype == np.float32 and env.action_space.contains(action)
+            obs, _, terminated, truncated, info = env.step(action)
+            collisions += info["collision"]
+            if terminated or truncated:
+                break
+        successes += terminated
+    env.close()
+    assert successes == 8
+    assert collisions == 0
+
+
+def test_missing_belief_keys_name_the_problem():
+    env = gym.make("AppearanceNav-v0", scene_seed=0)
+    obs, _ = env.reset(seed=0)
+    agent = ScriptedAgent(env.unwrapped.city)
+    with pytest.raises(ValueError, match=r"lacks the belief keys \['pose_mean', 'pose_cov'\]"):
+        agent.act(obs)
+    with pytest.raises(TypeError, match="belief observation dict"):
+        agent.act(np.zeros(3))
+    env.close()
+
+
+@pytest.mark.parametrize("key, value, match", [
+    ("pose_mean", np.zeros(2), r"shape \(3,\)"),
+    ("pose_cov", np.zeros(3), r"shape \(6,\)"),
+    ("goal", np.array([np.nan, 0.0]), "NaN"),
+])
+def test_bad_belief_values(key, value, match):
+    obs = _belief([0, 0, 0], [3, 3])
+    obs[key] = value
+    with pytest.raises(ValueError, match=match):
+        check_belief_observation(obs)
+
+
+def test_pure_pursuit_turns_in_place_then_drives():
+    pose = np.array([0.0, 0.0, 0.0])
+    v, w = pure_pursuit(pose, np.array([-1.0, 0.1]), 5.0, 0.9, 1.0, 0.6)
+    assert v == 0.0 and w == 1.0  # target behind, on the left
+    v, w = pure_pursuit(pose, np.array([1.0, -0.1]), 5.0, 0.9, 1.0, 0.6)
+    assert v > 0.8 and w < 0
+    v, _ = pure_pursuit(pose, np.array([0.1, 0.0]), 0.1, 0.9, 1.0, 0.6)
+    assert v < 0.6  # slows down near the goal
+
+
+def test_body_frame_and_navigation_features():
+    np.testing.assert_allclose(to_body_frame(np.array([[1.0, 1.0]]), np.array([1.0, 0.0, np.pi / 2])),
+                               [[1.0, 0.0]], atol=1e-12)
+    city = gym.make("AppearanceNav-v0", scene_seed=0).unwrapped.city
+    nav = NavigationFeatures(city)
+    c = city.street_centers
+    cov = np.array([0.04, 0.0, 0.0, 0.09, 0.0, 0.01])
+    out = nav(_belief([c[0], c[0], 0.0], [c[0] + 3.0, c[0]], cov))
+    assert nav.observation_space.contains(out)
+    np.testing.assert_allclose(out["waypoints"], [0.25, 0, 0.5, 0, 1.0, 0], atol=1e-6)
+    np.testing.assert_allclose(out["goal"], [0.3, 0.0], atol=1e-6)
+    np.testing.assert_allclose(out["uncertainty"], [0.2, 0.3, 0.1], atol=1e-6)
