@@ -9,7 +9,8 @@ replaces it, for training only, by progress in the street-path distance to the g
 where ``d`` is the length of the shortest street path (:class:`agents.planner.StreetPlanner`)
 from the robot to the goal. ``d`` uses the true pose in ``info["pose"]``: the reward is a
 training signal computed by the simulator (privileged, like the env's own reward); the
-policy's observation never contains the true pose.
+policy's observation never contains the true pose. At the end of an episode ``info`` gets
+``is_success`` (the goal was reached), which stable-baselines3's ``EvalCallback`` reports.
 """
 
 from __future__ import annotations
@@ -64,4 +65,6 @@ class StreetProgressReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
                   + self.success_bonus * float(terminated))
         self._distance = distance
         info["street_distance"] = distance
+        if terminated or truncated:
+            info["is_success"] = bool(terminated)  # read by stable-baselines3's EvalCallback
         return obs, reward, terminated, truncated, info

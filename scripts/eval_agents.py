@@ -1,0 +1,139 @@
+"""Evaluate the navigators on each pose source: success, path ratio, collisions, time to goal.
+
+CleanRL style: one file, every setting a field of ``Args`` (``--help`` lists them).
+
+    python scripts/eval_agents.py --episodes 100
+    python scripts/eval_agents.py --agents scripted --sources oracle,dead_reckoning
+
+For every agent (the scripted street navigator; PPO policies trained by
+``scripts/train_agent.py``, each evaluated on the pose source it was trained on) and pose
+source (oracle = true pose, belief = the GSE/EKF belief from images, dead_reckoning = the
+motion model alone), the same ``episodes`` resets (start pose and goal, seeds
+``seed .. seed + episodes - 1``, disjoint from the training and evaluation resets of
+``train_agent.py``) are run. Writes ``<out>/agents.md`` (table) and ``<out>/agents.json``
+(summary and every episode).
+
+Columns: success rate (goal reached before truncation), path ratio (distance driven / shortest
+street path, over successes), collision episodes (share of episodes with any contact), time
+to goal (simulated seconds, over successes), belief RMSE (m, belief mean vs true position).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
+
+# isort: split
+from agents.evaluation import as_records, run_episodes, summarize
+from agents.ppo import PPOAgent
+from agents.scripted import ScriptedAgent
+from agents.sources import POSE_SOURCES, make_pose_env
+from localization.localizer import AppearanceLocalizer
+
+AGENTS = ("scripted", "ppo")
+
+
+@dataclass
+class Args:
+    agents: str = field(default="scripted,ppo", metadata={"help": "comma-separated: scripted, ppo"})
+    sources: str = field(default=",".join(POSE_SOURCES), metadata={
+        "help": "comma-separated pose sources: " + ", ".join(POSE_SOURCES)})
+    localizer: str = field(default="results/localizer.npz", metadata={
+        "help": "fitted AppearanceLocalizer (belief and dead_reckoning)"})
+    measurement: str = field(default="", metadata={"help": "belief measurement model (empty: default)"})
+    policies: str = field(default="results/agents", metadata={
+        "help": "folder with <source>/policy.pt from train_agent.py"})
+    scene_seed: int = field(default=0, metadata={"help": "the city"})
+    camera: str = field(default="perspective", metadata={"help": "env camera"})
+    image_size: int = field(default=64, metadata={"help": "side of the square camera image"})
+    motion_noise: float = field(default=0.05, metadata={"help": "actuation noise of the env"})
+    max_episode_steps: int = field(default=400, metadata={"help": "episode truncation"})
+    episodes: int = field(default=100, metadata={"help": "episodes per agent and source"})
+    seed: int = field(default=2_000_000, metadata={"help": "first reset seed"})
+    out: str = field(default="results", metadata={"help": "where agents.md / agents.json go"})
+
+
+def parse_args(argv: list[str] | None = None) -> Args:
+    """Parse ``--field-name value`` options built from the fields of ``Args``."""
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    for f in dataclasses.fields(Args):
+        parser.add_argument("--" + f.name.replace("_", "-"), type=type(f.default),
+                            default=f.default, help=f"{f.metadata['help']} (default: {f.default!r})")
+    args = Args(**vars(parser.parse_args(argv)))
+    for name, known in (("agents", AGENTS), ("sources", POSE_SOURCES)):
+        bad = set(getattr(args, name).split(",")) - set(known)
+        if bad:
+            raise SystemExit(f"unknown {name} {sorted(bad)}; choose from {known}")
+    return args
+
+
+def table(rows: list[dict]) -> str:
+    """The markdown table of the summaries."""
+    lines = ["| agent | pose source | episodes | success rate | path ratio | collision episodes "
+             "| time to goal (s) | belief RMSE (m) |", "|---|---|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        lines.append(f"| {r['agent']} | {r['source']} | {r['episodes']} | {r['success_rate']:.2f} "
+                     f"| {r['path_ratio']:.2f} | {r['collision_episodes']:.2f} "
+                     f"| {r['time_to_goal']:.1f} | {r['belief_rmse']:.2f} |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> list[dict]:
+    args = parse_args(argv)
+    sources = args.sources.split(",")
+    localizer = None
+    if set(sources) - {"oracle"}:
+        localizer = AppearanceLocalizer.load(args.localizer)
+    seeds = range(args.seed, args.seed + args.episodes)
+    rows, episodes = [], {}
+    for source in sources:
+        env = make_pose_env(source, localizer, measurement=args.measurement or None,
+                            scene_seed=args.scene_seed, camera=args.camera,
+                            image_size=(args.image_size, args.image_size),
+                            motion_noise=args.motion_noise,
+                            max_episode_steps=args.max_episode_steps)
+        city = env.unwrapped.city
+        for name in args.agents.split(","):
+            if name == "scripted":
+                agent = ScriptedAgent(city)
+            else:
+                policy = Path(args.policies) / source / "policy.pt"
+                if not policy.exists():
+                    print(f"skipping ppo on {source}: no {policy} (run scripts/train_agent.py)")
+                    continue
+                agent = PPOAgent.load(policy, city)
+            t0 = time.perf_counter()
+            runs = run_episodes(env, agent, seeds, desc=f"{name} on {source}")
+            summary = {"agent": name, "source": source, **summarize(runs),
+                       "wall_seconds": round(time.perf_counter() - t0, 1)}
+            rows.append(summary)
+            episodes[f"{name}/{source}"] = as_records(runs)
+            print(table([summary]).splitlines()[-1], flush=True)
+        env.close()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    md = (f"# Navigation on the pose belief\n\nCity {args.scene_seed}, {args.camera} "
+          f"{args.image_size}x{args.image_size}, motion noise {args.motion_noise}, "
+          f"{args.episodes} episodes (reset seeds {args.seed}..), truncation at "
+          f"{args.max_episode_steps} steps.\n\n{table(rows)}\n")
+    (out / "agents.md").write_text(md)
+    (out / "agents.json").write_text(json.dumps({"args": dataclasses.asdict(args), "rows": rows,
+                                                  "episodes": episodes}, indent=1))
+    print(md)
+    return rows
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,170 @@
+"""Train a PPO navigator (stable-baselines3 ``MultiInputPolicy``) on a pose source.
+
+CleanRL style: one file, every setting a field of ``Args`` (``--help`` lists them).
+
+    python scripts/train_agent.py --pose-source belief --localizer results/localizer.npz
+    python scripts/train_agent.py --pose-source oracle --total-timesteps 300000
+
+The policy sees :class:`agents.observations.NavigationObservation` (the street plan and goal
+in the belief's body frame, plus the belief's standard deviations), never the true pose; it is
+rewarded for progress along the street path (:class:`agents.rewards.StreetProgressReward`).
+Writes to ``<out>/<pose_source>/``: ``policy.pt`` + ``policy.json`` (loadable without pickle by
+``agents.ppo.PPOAgent.load``), ``checkpoints/``, ``progress.csv`` (training log),
+``evaluations.npz`` (``EvalCallback``: returns, lengths and success rates on held-out resets)
+and ``train.json`` (settings, timing, final evaluation).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
+
+# isort: split
+import numpy as np
+import torch
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
+from stable_baselines3.common.logger import configure
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import DummyVecEnv
+from tqdm import tqdm
+
+from agents.observations import NavigationObservation
+from agents.ppo import make_ppo, save_policy
+from agents.rewards import StreetProgressReward
+from agents.sources import POSE_SOURCES, make_pose_env
+from localization.localizer import AppearanceLocalizer
+
+
+@dataclass
+class Args:
+    pose_source: str = field(default="belief", metadata={
+        "help": "what the policy navigates on: " + ", ".join(POSE_SOURCES)})
+    localizer: str = field(default="results/localizer.npz", metadata={
+        "help": "fitted AppearanceLocalizer (belief and dead_reckoning; make demo writes it)"})
+    measurement: str = field(default="", metadata={
+        "help": "belief measurement model (empty: BeliefWrapper's default)"})
+    scene_seed: int = field(default=0, metadata={"help": "the city"})
+    camera: str = field(default="perspective", metadata={"help": "env camera"})
+    image_size: int = field(default=64, metadata={"help": "side of the square camera image"})
+    motion_noise: float = field(default=0.05, metadata={"help": "actuation noise of the env"})
+    max_episode_steps: int = field(default=400, metadata={"help": "episode truncation"})
+    total_timesteps: int = field(default=300_000, metadata={"help": "PPO environment steps"})
+    n_envs: int = field(default=8, metadata={"help": "environments per rollout (in-process)"})
+    n_steps: int = field(default=256, metadata={"help": "rollout steps per environment"})
+    batch_size: int = field(default=512, metadata={"help": "PPO minibatch size"})
+    seed: int = field(default=0, metadata={"help": "seed of PPO and of the training resets"})
+    eval_freq: int = field(default=25_000, metadata={"help": "environment steps between evaluations"})
+    eval_episodes: int = field(default=20, metadata={"help": "episodes per evaluation"})
+    checkpoint_freq: int = field(default=100_000, metadata={"help": "steps between checkpoints"})
+    threads: int = field(default=1, metadata={"help": "torch threads"})
+    out: str = field(default="results/agents", metadata={"help": "output folder"})
+    progress: bool = field(default=True, metadata={"help": "show a progress bar"})
+
+
+def parse_args(argv: list[str] | None = None) -> Args:
+    """Parse ``--field-name value`` options built from the fields of ``Args``."""
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    for f in dataclasses.fields(Args):
+        kind = (lambda s: s.lower() in ("1", "true", "yes")) if isinstance(f.default, bool) \
+            else type(f.default)
+        parser.add_argument("--" + f.name.replace("_", "-"), type=kind, default=f.default,
+                            help=f"{f.metadata['help']} (default: {f.default!r})")
+    return Args(**vars(parser.parse_args(argv)))
+
+
+class ProgressBar(BaseCallback):
+    """A tqdm bar over the training steps, with the latest mean episode return."""
+
+    def __init__(self, total: int, enabled: bool) -> None:
+        super().__init__()
+        self.bar = tqdm(total=total, desc="ppo", unit="step", disable=not enabled)
+
+    def _on_step(self) -> bool:
+        self.bar.update(self.training_env.num_envs)
+        if self.model.ep_info_buffer:
+            self.bar.set_postfix(ret=f"{np.mean([e['r'] for e in self.model.ep_info_buffer]):.1f}")
+        return True
+
+    def _on_training_end(self) -> None:
+        self.bar.close()
+
+
+class PolicyCheckpoint(BaseCallback):
+    """Save the policy (no pickle) every ``freq`` environment steps."""
+
+    def __init__(self, folder: Path, freq: int) -> None:
+        super().__init__()
+        self.folder, self.freq, self.last = folder, freq, 0
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps - self.last >= self.freq:
+            self.last = self.num_timesteps
+            save_policy(self.model, self.folder / f"policy_{self.num_timesteps}")
+        return True
+
+
+def make_vec_env(args: Args, localizer: AppearanceLocalizer | None, n: int, seed: int
+                 ) -> DummyVecEnv:
+    """``n`` navigation envs on the pose source, seeded from ``seed``."""
+    def make() -> NavigationObservation:
+        env = make_pose_env(args.pose_source, localizer, measurement=args.measurement or None,
+                            scene_seed=args.scene_seed, camera=args.camera,
+                            image_size=(args.image_size, args.image_size),
+                            motion_noise=args.motion_noise,
+                            max_episode_steps=args.max_episode_steps)
+        return Monitor(NavigationObservation(StreetProgressReward(env)))
+    venv = DummyVecEnv([make] * n)
+    venv.seed(seed)
+    return venv
+
+
+def main(argv: list[str] | None = None) -> dict:
+    args = parse_args(argv)
+    torch.set_num_threads(args.threads)
+    out = Path(args.out) / args.pose_source
+    out.mkdir(parents=True, exist_ok=True)
+    localizer = None
+    if args.pose_source != "oracle":
+        localizer = AppearanceLocalizer.load(args.localizer)
+    venv = make_vec_env(args, localizer, args.n_envs, args.seed)
+    eval_env = make_vec_env(args, localizer, 1, args.seed + 1_000_000)
+    model = make_ppo(venv, seed=args.seed, n_steps=args.n_steps, batch_size=args.batch_size)
+    model.set_logger(configure(str(out), ["csv"]))
+    evaluation = EvalCallback(eval_env, n_eval_episodes=args.eval_episodes,
+                              eval_freq=max(args.eval_freq // args.n_envs, 1),
+                              log_path=str(out), deterministic=True, verbose=0)
+    callbacks = CallbackList([ProgressBar(args.total_timesteps, args.progress), evaluation,
+                              PolicyCheckpoint(out / "checkpoints", args.checkpoint_freq)])
+    t0 = time.perf_counter()
+    model.learn(args.total_timesteps, callback=callbacks)
+    seconds = time.perf_counter() - t0
+    policy = save_policy(model, out / "policy", **{"pose_source": args.pose_source,
+                                                    "scene_seed": args.scene_seed})
+    successes = getattr(evaluation, "evaluations_successes", [])
+    summary = {
+        "args": dataclasses.asdict(args), "train_seconds": round(seconds, 1),
+        "steps_per_second": round(args.total_timesteps / seconds, 1), "policy": str(policy),
+        "final_eval_success_rate": float(np.mean(successes[-1])) if successes else None,
+        "final_eval_return": float(evaluation.last_mean_reward),
+    }
+    (out / "train.json").write_text(json.dumps(summary, indent=2))
+    print(json.dumps(summary, indent=2))
+    venv.close()
+    eval_env.close()
+    return summary
+
+
+if __name__ == "__main__":
+    main()
