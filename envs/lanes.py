@@ -121,7 +121,7 @@ def street_lanes(city: Any, lanes: str = "streets", turn_radius: float = 0.8) ->
 
 
 def lane_poses(city: Any, n: int, rng: np.random.Generator, lanes: str = "streets",
-               lateral: float = 0.25, heading: float = 0.12, turn_radius: float = 0.8,
+               lateral: float = 0.3, heading: float = 0.2, turn_radius: float = 0.8,
                turn_weight: float = 8.0, margin: float = 0.32,
                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Sample n poses around the lanes of ``city`` (see the module docstring).
@@ -172,6 +172,6 @@ def lane_poses(city: Any, n: int, rng: np.random.Generator, lanes: str = "street
             poses.append(p)
             curvature.append(pieces[k].curvature)
     if len(poses) < n:
-        raise RuntimeError(f"found only {len(poses)} free lane poses of {n}: lateral offset "
-                           f"{lateral} m too large for the streets?")
+        raise RuntimeError(f"found only {len(poses)} free lane poses of {n} (margin {margin} m, "
+                           f"lateral offset {lateral} m): streets too narrow for them")
     return np.array(poses), np.array(curvature)

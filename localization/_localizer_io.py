@@ -32,6 +32,8 @@ def save_localizer(loc: Any, path: str | Path) -> None:
     for group in _GROUPS:
         arrays |= {f"{group}/{k}": v for k, v in getattr(loc, _ATTRS[group]).items()}
     arrays["control_gain"] = loc.control_gain_
+    if getattr(loc, "initial_noise_", None) is not None:
+        arrays["initial_noise"] = loc.initial_noise_
     if loc.process_noise_body_ is not None:
         arrays["process_noise_body"] = loc.process_noise_body_
     np.savez_compressed(path, settings=np.array(json.dumps(settings)),
@@ -64,6 +66,7 @@ def load_localizer(cls: type, path: str | Path) -> Any:
                                          if k.startswith(group + "/")})
         loc.control_gain_ = np.asarray(data["control_gain"], dtype=np.float64)
         loc.process_noise_body_ = data.get("process_noise_body")
+        loc.initial_noise_ = data.get("initial_noise")
     except Exception as err:
         raise ValueError(f"{path}: corrupted or incomplete localizer "
                          f"({type(err).__name__}: {err})") from err

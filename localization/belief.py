@@ -5,9 +5,17 @@ It runs :class:`~localization.filters.PoseEKF` with an
 ``x = F(x, k U)``, ``P = F P F^T + Q(x)`` (``k`` the localizer's calibrated control
 gains), then the chosen measurement model updates it with the new image's features,
 unless the NIS gate rejects the measurement or the GSE maps have no value there (the
-image or the predicted pose lies outside the training domain). After
-``relocalize_after`` steps in a row without an accepted measurement the belief restarts
-from psi* of the current image, as at the start.
+image or the predicted pose lies outside the training domain).
+
+Recovery: a gate that rejects the truth keeps rejecting it (a sudden heading kick of
+0.2 rad against a belief sure to 0.03 rad lost the robot on a held-out city). From the
+``inflate_after``-th rejection in a row on, the heading variance (row and column of P) is
+multiplied by ``inflate_factor`` each step, up to a standard deviation of
+``MAX_HEADING_STD``, so the gate widens for a heading error until the measurements are
+accepted again. Only the heading: inflating the position too let a burst of aliased
+measurements through (one moved a belief 2.5 m sideways). An isolated outlier (e.g. a
+corrupted image) changes nothing. After ``relocalize_after`` steps in a row without an
+accepted measurement the belief restarts from psi* of the current image, as at the start.
 
 :class:`~localization.wrappers.BeliefWrapper` drives it from an env;
 :meth:`AppearanceLocalizer.fit_noise` runs it over a recorded drive to calibrate the noise.
@@ -27,6 +35,7 @@ if TYPE_CHECKING:
 
 Array = NDArray[np.float64]
 STATUSES = ("initial", "accepted", "gated", "out_of_domain", "relocalized")
+MAX_HEADING_STD = 0.5  # rad: heading inflation stops there
 
 
 class BeliefFilter:
@@ -44,6 +53,10 @@ class BeliefFilter:
     relocalize_after : int or None
         Consecutive steps without an accepted measurement before the belief restarts from
         psi* (None: never).
+    inflate_after : int or None
+        Consecutive gated steps from which the heading variance is inflated (None: never).
+    inflate_factor : float
+        Factor of the heading variance per further gated step.
     alpha : array_like (3,), optional
         Body-frame covariance inflation (along, cross, heading) of Q, R and P0; default the
         localizer's calibrated ``consistency_[measurement]``.
@@ -57,10 +70,16 @@ class BeliefFilter:
 
     def __init__(self, localizer: AppearanceLocalizer, motion_model: Any,
                  measurement: str = "representation",
-                 gate_probability: float | None = 0.997, relocalize_after: int | None = 20,
-                 alpha: ArrayLike | None = None) -> None:
+                 gate_probability: float | None = 0.997, relocalize_after: int | None = 50,
+                 alpha: ArrayLike | None = None, inflate_after: int | None = 3,
+                 inflate_factor: float = 2.0) -> None:
         if relocalize_after is not None and relocalize_after < 1:
             raise ValueError(f"relocalize_after must be >= 1 or None, got {relocalize_after}")
+        if inflate_after is not None and inflate_after < 1:
+            raise ValueError(f"inflate_after must be >= 1 or None, got {inflate_after}")
+        if not inflate_factor >= 1.0:
+            raise ValueError(f"inflate_factor must be >= 1, got {inflate_factor}")
+        self.inflate_after, self.inflate_factor = inflate_after, float(inflate_factor)
         self.localizer = localizer
         self.motion_model = motion_model
         self.measurement = measurement
@@ -73,6 +92,7 @@ class BeliefFilter:
         self.ekf: PoseEKF | None = None
         self.last_update: UpdateResult | None = None
         self.misses = 0
+        self.gated = 0
 
     @property
     def x(self) -> Array:
@@ -96,10 +116,10 @@ class BeliefFilter:
     def _start(self, x0: ArrayLike, P0: ArrayLike) -> None:
         self.ekf = PoseEKF(self.motion_model, self._Q, x0, P0,
                            gate_probability=self.gate_probability)
-        self.misses = 0
+        self.misses = self.gated = 0
 
     def _from_image(self, w: Array) -> bool:
-        x0, P0 = self.localizer.initial_belief(w, alpha=self.localizer.consistency("pose"))
+        x0, P0 = self.localizer.initial_belief(w)
         if not np.all(np.isfinite(x0)):
             return False
         self._start(x0, P0)
@@ -142,6 +162,13 @@ class BeliefFilter:
         self.ekf.predict(self.gain * np.asarray(u, dtype=np.float64))
         w = np.asarray(w, dtype=np.float64)
         nis, status = self._update(w)
+        self.gated = self.gated + 1 if status == "gated" else 0
+        if self.inflate_after is not None and self.gated >= self.inflate_after:
+            P = self.ekf.P
+            f = min(self.inflate_factor, MAX_HEADING_STD ** 2 / P[2, 2])
+            if f > 1.0:
+                d = np.array([1.0, 1.0, np.sqrt(f)])
+                self.ekf.P = d[:, None] * P * d[None, :]
         if status == "accepted":
             self.misses = 0
         else:

@@ -37,37 +37,23 @@ crossed only in the middle of turns).
 
 from __future__ import annotations
 
-import io
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from sklearn.exceptions import NotFittedError
-from sklearn.model_selection import KFold
 
 from envs.motion_model import wrap_angle
-from localization.features import features_from_state, make_features
-from localization.filters import FunctionMeasurement, pose_residual
 from localization._localizer_io import load_localizer, save_localizer
-from localization.measurement_noise import (
-    body_to_world,
-    consistency_inflation,
-    correlation_time,
-    inflate,
-    robust_covariance,
-    to_body,
-)
-from localization.process_noise import (
-    estimate_control_gain,
-    estimate_process_noise,
-    world_process_noise,
-)
+from localization._localizer_noise import MEASUREMENTS, NoiseModelMixin, check_data
+from localization.features import make_features
+from localization.filters import FunctionMeasurement, pose_residual
+from localization.measurement_noise import body_to_world, inflate
+from localization.process_noise import world_process_noise
 from localization.regression import GSERegressor
 
 Array = NDArray[np.float64]
-MEASUREMENTS = ("pose", "features", "representation")
 _YAW_BINS = 72
 
 
@@ -78,20 +64,7 @@ def sparsest_heading(yaw: ArrayLike, bins: int = _YAW_BINS) -> float:
     return float(0.5 * (edges[i] + edges[i + 1]))
 
 
-def _check_data(images: ArrayLike, poses: ArrayLike, what: str = ""
-                ) -> tuple[NDArray[np.uint8], Array]:
-    images, poses = np.asarray(images), np.asarray(poses, dtype=np.float64)
-    if images.ndim != 4 or images.shape[-1] != 3 or images.dtype != np.uint8:
-        raise ValueError(f"{what}images must be uint8 of shape (n, H, W, 3), got "
-                         f"{images.shape} {images.dtype}")
-    if poses.shape != (len(images), 3):
-        raise ValueError(f"{what}poses must have shape ({len(images)}, 3), got {poses.shape}")
-    if not np.all(np.isfinite(poses)):
-        raise ValueError(f"{what}poses contain NaN or inf")
-    return images, poses
-
-
-class AppearanceLocalizer:
+class AppearanceLocalizer(NoiseModelMixin):
     """Localize a camera from its images: image rows + features + GSE regression + noise.
 
     Parameters
@@ -126,6 +99,9 @@ class AppearanceLocalizer:
     noise_ : dict of str -> ndarray
         R per measurement model: "pose" and "representation" (3, 3) pose-error covariances
         in the body frame, "features" (m, m); inflated by ``correlation_time_``.
+    initial_noise_ : ndarray (3, 3)
+        Plain (not robust) second moment of the pose residuals in the body frame: the
+        covariance of the initial belief, which must cover psi*'s rare metre-scale errors.
     correlation_time_, residual_rms_ : dict of str -> ndarray
         Per-component correlation time (1 for K-fold residuals) and plain residual RMS.
     consistency_ : dict of str -> ndarray (3,)
@@ -165,7 +141,7 @@ class AppearanceLocalizer:
         -------
         self
         """
-        images, poses = _check_data(images, poses)
+        images, poses = check_data(images, poses)
         self._row_slice(images.shape[1])  # validates rows
         if int(self.noise_folds) < 0 or int(self.noise_folds) == 1:
             raise ValueError(f"noise_folds must be 0 or >= 2, got {self.noise_folds}")
@@ -184,96 +160,19 @@ class AppearanceLocalizer:
         self.correlation_time_: dict[str, Array] = {}
         self.residual_rms_: dict[str, Array] = {}
         self.consistency_: dict[str, Array] = {}
+        self.initial_noise_: Array | None = None
         if int(self.noise_folds) >= 2:
             self._set_noise(self._k_fold_residuals(W, poses), sequence=False)
         self.process_noise_body_: Array | None = None
         self.control_gain_ = np.ones(2)
         return self
 
-    def fit_process_noise(self, motion_model: Any, poses: ArrayLike, controls: ArrayLike,
-                          episode_starts: ArrayLike | None = None,
-                          calibrate_controls: bool = True) -> AppearanceLocalizer:
-        """Control gains and body-frame process noise from recorded motion (commanded
-        controls against the true poses that followed them).
-
-        Sets ``control_gain_`` (:func:`~localization.process_noise.estimate_control_gain`;
-        (1, 1) with ``calibrate_controls=False``) and ``process_noise_body_``
-        (:func:`~localization.process_noise.estimate_process_noise` with the calibrated
-        controls). The filter predicts with ``F(x, control_gain_ * U)``.
-        """
-        self._check_fitted()
-        gain = (estimate_control_gain(motion_model, poses, controls, episode_starts)
-                if calibrate_controls else np.ones(2))
-        self.process_noise_body_ = estimate_process_noise(
-            motion_model, poses, np.asarray(controls, dtype=np.float64) * gain, episode_starts)
-        self.control_gain_ = gain
-        return self
-
-    def fit_noise(self, motion_model: Any, images: ArrayLike, poses: ArrayLike,
-                  controls: ArrayLike, measurements: tuple[str, ...] = MEASUREMENTS,
-                  calibrate: bool = True, gate_probability: float | None = 0.997,
-                  ) -> AppearanceLocalizer:
-        """The whole noise model from one recorded drive not used in :meth:`fit`.
-
-        1. control gains and Q from the controls (:meth:`fit_process_noise`);
-        2. R of each model from the residuals of its measurements at the true poses:
-           robust covariance, inflated per component by the residuals' correlation time;
-        3. with ``calibrate``, the filter runs over the drive (from the true start pose) and
-           Q, R and P0 are inflated per body component until its covariance matches its
-           errors (:func:`~localization.measurement_noise.consistency_inflation`). A drive
-           driven on the belief itself (closed loop) calibrates for that use.
-
-        Parameters
-        ----------
-        motion_model : object
-            F (``envs.motion_model.UnicycleModel`` of the env).
-        images : (n + 1, H, W, 3) uint8
-            The frames of the drive, in time order (frame 0 before the first control).
-        poses : (n + 1, 3)
-        controls : (n, 2)
-            Commanded controls; controls[t] moves the robot from frame t to t + 1.
-        measurements : tuple of str
-            Models whose consistency is calibrated.
-        calibrate : bool
-        gate_probability : float or None
-            The NIS gate used while calibrating (as in the wrapper).
-        """
-        self._check_fitted()
-        images, poses = _check_data(images, poses, "drive ")
-        controls = np.asarray(controls, dtype=np.float64)
-        if controls.shape != (len(poses) - 1, 2):
-            raise ValueError(f"controls must have shape ({len(poses) - 1}, 2), got "
-                             f"{controls.shape}")
-        self.fit_process_noise(motion_model, poses, controls)
-        W = self.transform(images)
-        self._set_noise(self._residuals(self.regressor_, W, poses), sequence=True)
-        self.consistency_ = {}
-        if calibrate:
-            from localization.belief import BeliefFilter  # belief imports this module
-
-            for m in measurements:
-                def run(alpha: Array, m: str = m) -> tuple[Array, Array]:
-                    belief = BeliefFilter(self, motion_model, m, gate_probability, None, alpha)
-                    P0 = body_to_world(inflate(self.noise_["pose"], alpha), poses[0, 2])
-                    means, covs, _ = belief.run(W, controls, poses[0], P0)
-                    return means, covs
-
-                self.consistency_[m] = consistency_inflation(run, poses)
-        return self
-
-    def _set_noise(self, res: dict[str, Array], sequence: bool) -> None:
-        for k, e in res.items():
-            C = robust_covariance(e, self.random_state)
-            tau = correlation_time(e, C) if sequence else np.ones(e.shape[1])
-            self.noise_[k], self.correlation_time_[k] = inflate(C, tau), tau
-            self.residual_rms_[k] = np.sqrt(np.nanmean(e ** 2, axis=0))
-
     def _row_slice(self, height: int) -> slice:
         a, b = (float(r) for r in self.rows)
         if not 0.0 <= a < b <= 1.0:
             raise ValueError(f"rows must be fractions 0 <= start < stop <= 1, got {self.rows}")
-        start = int(round(a * height))
-        return slice(start, max(int(round(b * height)), start + 1))
+        start = round(a * height)
+        return slice(start, max(round(b * height), start + 1))
 
     def _crop(self, images: NDArray[np.uint8]) -> NDArray[np.uint8]:
         return np.ascontiguousarray(images[:, self._row_slice(images.shape[1])])
@@ -292,32 +191,6 @@ class AppearanceLocalizer:
     def _new_regressor(self) -> GSERegressor:
         params = {**(self.regressor_params or {}), "periodic": (2,), "out_of_domain": "nan"}
         return GSERegressor(**params)
-
-    def _residuals(self, reg: GSERegressor, W: Array, poses: Array) -> dict[str, Array]:
-        """Residuals ``z - h(theta)`` at the true poses (NaN rows out of the domain):
-        "pose" psi*(w) - theta and "representation" (dR*/dtheta)^-1 (r*(w) - R*(theta)),
-        both pose errors in the body frame (along, cross, heading); "features" w - Phi*."""
-        theta = self._to_model(poses)
-        pose_err = self._from_model(reg.predict(W)) - poses
-        J = reg.embed_pose_jacobian(theta)
-        ok = np.all(np.isfinite(J), axis=(1, 2))
-        rep = reg.embed(W) - reg.embed_pose(theta)
-        rep_err = np.full_like(rep, np.nan)
-        rep_err[ok] = np.linalg.solve(J[ok], rep[ok][..., None])[..., 0]
-        return {"pose": to_body(pose_err, poses[:, 2]),
-                "features": W - reg.predict_features(theta),
-                "representation": to_body(rep_err, poses[:, 2])}
-
-    def _k_fold_residuals(self, W: Array, poses: Array) -> dict[str, Array]:
-        """Held-out residuals of K-fold refits (the features are fitted once on all images:
-        unsupervised, they see no pose)."""
-        folds = KFold(int(self.noise_folds), shuffle=True, random_state=self.random_state)
-        parts: dict[str, list[Array]] = {k: [] for k in MEASUREMENTS}
-        for train, test in folds.split(W):
-            reg = self._new_regressor().fit(W[train], self._to_model(poses[train]))
-            for k, e in self._residuals(reg, W[test], poses[test]).items():
-                parts[k].append(e)
-        return {k: np.concatenate(v) for k, v in parts.items()}
 
     # -------------------------------------------------------------- predict
     def _check_fitted(self, noise: bool = False) -> None:
@@ -344,12 +217,14 @@ class AppearanceLocalizer:
 
     def transform(self, images: ArrayLike) -> Array:
         """Features w = omega(X) of images, shape (n, m)."""
-        return self.features_.transform(self._crop(self.check_images(images)))
+        crop = self._crop(self.check_images(images))
+        return self.features_.transform(crop)
 
     def predict(self, images: ArrayLike) -> Array:
         """psi*(X): poses (n, 3) of images (n, H, W, 3); NaN rows for images whose
         features lie outside the training domain."""
-        return self._from_model(self.regressor_.predict(self.transform(images)))
+        W = self.transform(images)
+        return self._from_model(self.regressor_.predict(W))
 
     def measure(self, w: ArrayLike, measurement: str) -> Array:
         """The measurement z of the named model from one feature vector w (m,).
@@ -412,16 +287,15 @@ class AppearanceLocalizer:
 
         return FunctionMeasurement(h=lambda x: reg.embed_pose(to_model(x))[0], H=H, R=R_rep)
 
-    def initial_belief(self, w: ArrayLike, alpha: ArrayLike | None = None
-                       ) -> tuple[Array, Array]:
-        """Belief (mean (3,), covariance (3, 3)) from one image's features: psi*(w) with
-        the pose measurement noise at that heading (inflated by ``alpha``, default the
-        calibrated consistency of "pose"). The mean is NaN when w is out of domain."""
+    def initial_belief(self, w: ArrayLike) -> tuple[Array, Array]:
+        """Belief (mean (3,), covariance (3, 3)) from one image's features: psi*(w) with the
+        plain second moment of psi*'s residuals at that heading (``initial_noise_``: unlike
+        R it counts the rare aliasing errors, which a single image cannot be gated
+        against). The mean is NaN when w is out of the training domain."""
         self._check_fitted(noise=True)
-        alpha = self.consistency("pose") if alpha is None else np.asarray(alpha, float)
         x0 = self.measure(w, "pose")
         yaw = float(x0[2]) if np.isfinite(x0[2]) else 0.0
-        return x0, body_to_world(inflate(self.noise_["pose"], alpha), yaw)
+        return x0, body_to_world(self.initial_noise_, yaw)
 
     def prior(self) -> tuple[Array, Array]:
         """Mean (3,) and covariance (3, 3) of the training poses: a know-nothing belief."""

@@ -133,14 +133,17 @@ def body_errors(means: ArrayLike, covs: ArrayLike, poses: ArrayLike) -> tuple[Ar
 
 
 def consistency_inflation(run: Callable[[Array], tuple[Array, Array]], poses: ArrayLike,
-                          iterations: int = 4, burn_in: int = 30) -> Array:
+                          iterations: int = 4, burn_in: int = 30, lost: float = 1.0,
+                          max_alpha: float = 100.0, start: ArrayLike | None = None) -> Array:
     """Per-component covariance inflation ``alpha`` (along, cross, heading) that makes a filter
     consistent on a recorded drive: mean ``e_j^2 / P_jj`` = 1 in the body frame.
 
     Scaling Q, R and P0 of a linear filter by the same factor leaves its estimates unchanged
     and scales P by that factor; per body component this holds approximately, so a few
     fixed-point steps ``alpha_j <- alpha_j mean(e_j^2 / P_jj)`` converge. Only inflation is
-    applied (``alpha >= 1``): a conservative component is left alone.
+    applied (``alpha >= 1``): a conservative component is left alone. Steps where the filter
+    is lost (position error above ``lost`` metres) are left out: that is a failure for the
+    recovery logic, not noise to average into every step's covariance.
 
     Parameters
     ----------
@@ -152,14 +155,23 @@ def consistency_inflation(run: Callable[[Array], tuple[Array, Array]], poses: Ar
     iterations : int
     burn_in : int
         Steps ignored at the start (the initial transient).
+    lost : float
+        Position error (m) above which a step is left out.
+    max_alpha : float
+        Upper bound of each factor.
+    start : array_like (3,), optional
+        Initial alpha (default ones).
     """
     poses = np.asarray(poses, dtype=np.float64)
-    alpha = np.ones(3)
+    alpha = np.ones(3) if start is None else np.asarray(start, dtype=np.float64).copy()
     for _ in range(iterations):
         means, covs = run(alpha)
-        e, P = body_errors(means, covs, poses)
-        ratio = np.mean(e[burn_in:] ** 2 / np.diagonal(P[burn_in:], axis1=1, axis2=2), axis=0)
-        alpha = np.maximum(1.0, alpha * ratio)
+        e, P = body_errors(means[burn_in:], covs[burn_in:], poses[burn_in:])
+        ok = np.hypot(e[:, 0], e[:, 1]) < lost
+        if ok.sum() < 10:
+            break
+        ratio = np.mean(e[ok] ** 2 / np.diagonal(P[ok], axis1=1, axis2=2), axis=0)
+        alpha = np.clip(alpha * ratio, 1.0, max_alpha)
     return alpha
 
 

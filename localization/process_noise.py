@@ -83,14 +83,17 @@ def prediction_errors(model: MotionModel, poses: ArrayLike, controls: ArrayLike,
 
 
 def estimate_control_gain(model: MotionModel, poses: ArrayLike, controls: ArrayLike,
-                          episode_starts: ArrayLike | None = None) -> NDArray[np.float64]:
+                          episode_starts: ArrayLike | None = None, min_distance: float = 10.0,
+                          min_turn: float = 2.0 * np.pi) -> NDArray[np.float64]:
     """Control gains ``k = (k_v, k_w)`` that make ``F(theta_t, k * U_t)`` fit the drive best.
 
     Least squares (:func:`scipy.optimize.least_squares`) on the body-frame one-step
     errors, the heading error weighted by the ratio of the along-track to the heading
     spread of the motion so both count. Transitions marked in ``episode_starts`` are
     excluded. ``k = (1, 1)`` means F is unbiased; ``k_v = 0.95`` that the robot covers
-    5 % less distance than commanded.
+    5 % less distance than commanded. A gain the drive does not excite is left at 1: k_v
+    needs ``min_distance`` metres of commanded travel, k_w ``min_turn`` radians of commanded
+    turning (a short straight drive says nothing about the turning gain).
 
     Returns
     -------
@@ -103,7 +106,8 @@ def estimate_control_gain(model: MotionModel, poses: ArrayLike, controls: ArrayL
         ~np.asarray(episode_starts, dtype=bool)
     if keep.sum() < 10:
         raise ValueError(f"need at least 10 recorded transitions, got {int(keep.sum())}")
-    moving = np.abs(controls[keep]).sum(axis=0) > 0
+    dt = getattr(model, "dt", 1.0)
+    moving = np.abs(controls[keep]).sum(axis=0) * dt >= [min_distance, min_turn]
     dyaw = wrap_angle(np.diff(poses[:, 2]))[keep]
     step = np.hypot(*np.diff(poses[:, :2], axis=0).T)[keep]
     weight = np.sqrt(np.mean(step ** 2) / max(np.mean(dyaw ** 2), 1e-12))
@@ -112,8 +116,18 @@ def estimate_control_gain(model: MotionModel, poses: ArrayLike, controls: ArrayL
         e = prediction_errors(model, poses, controls * k)[keep]
         return (e * [1.0, 1.0, weight]).ravel()
 
-    fit = least_squares(residuals, np.ones(2), x_scale=np.ones(2))
-    return np.where(moving, fit.x, 1.0)
+    if not moving.any():
+        return np.ones(2)
+
+    def fitted(k_free: NDArray[np.float64]) -> NDArray[np.float64]:
+        k = np.ones(2)
+        k[moving] = k_free
+        return residuals(k)
+
+    fit = least_squares(fitted, np.ones(int(moving.sum())))
+    k = np.ones(2)
+    k[moving] = fit.x
+    return k
 
 
 def estimate_process_noise(model: MotionModel, poses: ArrayLike, controls: ArrayLike,

@@ -4,9 +4,11 @@ Shared by ``scripts/track.py``, ``scripts/demo.py``, ``scripts/bench_filter.py``
 
 - :func:`fit_city_localizer`: the whole fit on one city: images around the driving lanes
   (``envs.collect_dataset(mode="lanes")``), :meth:`AppearanceLocalizer.fit`, a drive around
-  the route on the true pose for the process and measurement noise, then a drive on the
-  belief (closed loop, "representation" model) on which every model's consistency is
-  calibrated (:meth:`AppearanceLocalizer.fit_noise`).
+  the route on the true pose for the process and measurement noise
+  (:meth:`AppearanceLocalizer.fit_noise`) and a first consistency calibration
+  (:meth:`AppearanceLocalizer.calibrate`), then a drive on that belief (closed loop,
+  "representation" model) on which the calibration is refined: in closed loop the robot
+  follows the belief's errors, which the true-pose drive does not show.
 - :func:`track_route`: drive ``steps`` steps along the route with a pure-pursuit controller
   on the belief mean (:class:`~localization.wrappers.BeliefWrapper`), and dead-reckon the
   same commanded controls from the true start pose (F alone).
@@ -56,7 +58,8 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
                        n_drive: int = 1500, seed: int = 0,
                        localizer_params: dict[str, Any] | None = None,
                        lane_options: dict[str, Any] | None = None,
-                       calibrate_on_belief: bool = True, progress: bool = False,
+                       calibrate_on_belief: bool = True,
+                       measurements: tuple[str, ...] = MEASUREMENTS, progress: bool = False,
                        ) -> tuple[AppearanceLocalizer, dict[str, float]]:
     """Fit an :class:`AppearanceLocalizer` and its noise model on the env's city.
 
@@ -77,7 +80,10 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
     lane_options : dict, optional
         Extra options of the "lanes" dataset (``lateral``, ``heading``, ...).
     calibrate_on_belief : bool
-        Calibrate the consistency on a closed-loop drive (else on the true-pose drive).
+        After calibrating the consistency on the true-pose drive, refine it on a drive on
+        that belief (closed loop, "representation" model).
+    measurements : tuple of str
+        Models whose consistency is calibrated.
     progress : bool
 
     Returns
@@ -98,11 +104,12 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
     t0 = time.perf_counter()
     motion_model = env.unwrapped.motion_model
     images, poses, controls = drive_route(env, n_drive, seed=seed + 1, progress=progress)
-    loc.fit_noise(motion_model, images, poses, controls, calibrate=not calibrate_on_belief)
+    loc.fit_noise(motion_model, images, poses, controls)
+    loc.calibrate(motion_model, images, poses, controls, measurements)
     if calibrate_on_belief:
         run = track_route(env, loc, "representation", n_drive, start=0, seed=seed + 2,
                           keep_images=True)
-        loc.fit_noise(motion_model, run.images, run.true, run.controls)
+        loc.calibrate(motion_model, run.images, run.true, run.controls, measurements)
     seconds["noise"] = time.perf_counter() - t0
     return loc, seconds
 

@@ -27,10 +27,9 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
-
-from envs.motion_model import wrap_angle
 from sklearn.exceptions import NotFittedError
 
+from envs.motion_model import wrap_angle
 from localization.belief import BeliefFilter
 from localization.filters import PoseEKF
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer
@@ -128,6 +127,9 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
     relocalize_after : int or None
         After this many consecutive steps without an accepted measurement the belief is
         re-initialised from psi* of the current image (as at reset); None never does.
+    inflate_after : int or None
+        From this many consecutive gated measurements on, P is inflated each step so the
+        gate widens (see :class:`~localization.belief.BeliefFilter`); None never does.
 
     Notes
     -----
@@ -138,11 +140,12 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
 
     def __init__(self, env: gym.Env, localizer: AppearanceLocalizer,
                  measurement: str = "representation", keep_image: bool = False,
-                 gate_probability: float | None = 0.997, relocalize_after: int | None = 20,
-                 ) -> None:
+                 gate_probability: float | None = 0.997, relocalize_after: int | None = 50,
+                 inflate_after: int | None = 3) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self, localizer=localizer, measurement=measurement, keep_image=keep_image,
-            gate_probability=gate_probability, relocalize_after=relocalize_after)
+            gate_probability=gate_probability, relocalize_after=relocalize_after,
+            inflate_after=inflate_after)
         if measurement not in MEASUREMENTS:
             raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
         _PoseObservation.__init__(self, env, keep_image)
@@ -150,7 +153,8 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         self.localizer = localizer
         self.measurement = measurement
         self.belief = BeliefFilter(localizer, env.unwrapped.motion_model, measurement,
-                                   gate_probability, relocalize_after)
+                                   gate_probability, relocalize_after,
+                                   inflate_after=inflate_after)
         self._dof = int(np.asarray(self.belief.model.R_at(np.zeros(3))).shape[0]) \
             if measurement == "features" else 3
 
@@ -293,7 +297,7 @@ class DeadReckoningWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         obs, info = self.env.reset(seed=seed, options=options)
         if "pose" not in info:
             raise KeyError("DeadReckoningWrapper needs info['pose'] from the env at reset")
-        Q = lambda x, u: world_process_noise(self.process_noise_body, x)  # noqa: E731
+        Q = lambda x, u: world_process_noise(self.process_noise_body, x)
         self.ekf = PoseEKF(self.motion_model, Q, info["pose"], self._P0, gate_probability=None)
         self.mean, self.cov = self.ekf.x.copy(), self.ekf.P.copy()
         self._add_nees(info)
