@@ -63,7 +63,7 @@ class Args:
     motion_noise: float = field(default=0.1, metadata={"help": "env actuation noise"})
     lanes: str = field(default="streets", metadata={
         "help": "training lanes: 'streets' (all, both ways) or 'route'"})
-    n_train: int = field(default=24000, metadata={"help": "training images around the lanes"})
+    n_train: int = field(default=20000, metadata={"help": "training images around the lanes"})
     n_drive: int = field(default=1000, metadata={"help": "steps of each noise drive"})
     steps: int = field(default=1000, metadata={"help": "steps of each tracking run"})
     start: int = field(default=0, metadata={"help": "tracking start (route path point)"})
@@ -150,12 +150,13 @@ def main(argv: list[str] | None = None) -> dict:
           f"{fit_seconds['collect']:.0f} s, fitted in {fit_seconds['fit']:.0f} s, noise model "
           f"in {fit_seconds['noise']:.0f} s", flush=True)
     t1 = time.perf_counter()
-    top = env.unwrapped.render()
     rows = []
     for name in MEASUREMENTS:
         run = track_route(env, loc, name, args.steps, start=args.start, seed=args.seed + 7)
         m = track_metrics(run)
-        png = plot_track(run, top, env.unwrapped.city.bounds, out / f"track_{name}.png")
+        env.unwrapped.set_pose(run.true[0])  # the map shows the robot at the start
+        png = plot_track(run, env.unwrapped.render(), env.unwrapped.city.bounds,
+                         out / f"track_{name}.png")
         rows.append({"measurement": name, **m, "png": str(png)})
         print(f"[demo] {name}: RMSE {m['rmse']:.3f} m vs dead reckoning "
               f"{m['rmse_dead_reckoning']:.2f} m", flush=True)

@@ -130,7 +130,6 @@ def run(args: Args, env: gym.Env | None = None, localizer: AppearanceLocalizer |
     if localizer is None:
         localizer, seconds = get_localizer(env, args, out)
     base = env.unwrapped
-    top = base.render()
     rows = []
     t0 = time.perf_counter()
     for name in args.measurements.split(","):
@@ -138,7 +137,9 @@ def run(args: Args, env: gym.Env | None = None, localizer: AppearanceLocalizer |
             result = track_route(env, localizer, name, args.steps, start=start,
                                  seed=args.seed + 100 + start)
             m = track_metrics(result)
-            png = plot_track(result, top, base.city.bounds, out / f"track_{name}_{start}.png")
+            base.set_pose(result.true[0])  # the map shows the robot at the start
+            png = plot_track(result, base.render(), base.city.bounds,
+                             out / f"track_{name}_{start}.png")
             rows.append({"measurement": name, "start": start, **m, "png": str(png)})
             print(f"{name:>14} start {start:>5}: RMSE {m['rmse']:.3f} m, dead reckoning "
                   f"{m['rmse_dead_reckoning']:.2f} m (ratio {m['ratio']:.3f}), NEES "
