@@ -35,6 +35,7 @@ test: setup
 bench: setup
 	$(RUN) scripts/bench_env.py --cameras
 	$(RUN) scripts/bench_gse.py
+	$(RUN) scripts/bench_filter.py
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

@@ -7,10 +7,19 @@ true ``poses`` (n, 3) float64 ``[x, y, yaw]``:
   grid spacing is the largest giving at least n poses; n of them are taken evenly);
 - ``"random"``: uniform random free poses;
 - ``"route"``: the robot drives (physics, the env's motion noise) around
-  ``city.route()`` with a pure-pursuit controller; one sample per env step.
+  ``city.route()`` with a pure-pursuit controller; one sample per env step;
+- ``"lanes"``: poses around the driving lanes of the street graph (``envs.lanes``: every
+  street in both directions and every turn, or only the route's), each reached *driving*:
+  the robot is placed ``ROLL_STEPS`` steps before the pose at cruise speed and drives
+  there, so the camera has the pitch and roll of a moving robot (a teleported robot
+  stands level; a driving one pitches ~1 degree, which shifted a localizer trained on
+  level images by ~0.1 m along track).
 
 For "grid" and "random" the robot is teleported (``mj_forward``) and the camera
 rendered, which is fast.
+
+:func:`drive_route` records a drive around the route with its controls (for the process
+noise and the measurement noise of a filter).
 """
 
 from __future__ import annotations
@@ -21,17 +30,22 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import mujoco
 import numpy as np
 from numpy.typing import NDArray
 from tqdm.auto import tqdm
 
+from envs.lanes import lane_poses
 from envs.motion_model import wrap_angle
-from envs.robot import ROBOT_RADIUS
+from envs.robot import HALF_TRACK, ROBOT_RADIUS, WHEEL_RADIUS
 
-__all__ = ["MODES", "PurePursuit", "collect_dataset", "grid_poses", "load_dataset", "save_dataset"]
+__all__ = ["MODES", "PurePursuit", "collect_dataset", "drive_route", "grid_poses", "load_dataset",
+           "save_dataset"]
 
-MODES = ("grid", "random", "route")
+MODES = ("grid", "random", "route", "lanes")
 POSE_MARGIN = ROBOT_RADIUS + 0.1  # m of clearance to buildings for teleported poses
+ROLL_STEPS = 3  # env steps driven into each "lanes" pose
+CRUISE_SPEED = 0.6  # m/s, PurePursuit's default speed
 
 
 def grid_poses(city: Any, n: int, n_headings: int = 8, margin: float = POSE_MARGIN) -> NDArray[np.float64]:
@@ -77,10 +91,14 @@ class PurePursuit:
         self.lookahead, self.speed, self.w_max, self.step = lookahead, speed, w_max, step
         self.index = 0
 
-    def start_pose(self) -> NDArray[np.float64]:
-        """The first path point, heading along the path, (3,)."""
-        d = self.path[1] - self.path[0]
-        return np.array([*self.path[0], np.arctan2(d[1], d[0])])
+    def start_pose(self, index: int = 0) -> NDArray[np.float64]:
+        """Path point ``index`` (default the first), heading along the path, (3,); the
+        controller continues from there."""
+        n = len(self.path)
+        index = int(index) % n
+        self.index = index
+        d = self.path[(index + 1) % n] - self.path[index]
+        return np.array([*self.path[index], np.arctan2(d[1], d[0])])
 
     def __call__(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
         """Return the control U = [v, w] for the current pose."""
@@ -95,18 +113,49 @@ class PurePursuit:
         return np.array([v, w])
 
 
+def _drive_into(base: Any, pose: NDArray[np.float64], curvature: float, steps: int
+                ) -> tuple[NDArray[np.uint8], NDArray[np.float64]]:
+    """Place the robot ``steps`` env steps back along an arc of ``curvature`` at cruise speed
+    (body and wheels moving), drive ``[v, v * curvature]`` into ``pose``; image and true pose."""
+    v, w = CRUISE_SPEED, CRUISE_SPEED * curvature
+    back = steps * base.dt
+    yaw0 = pose[2] - w * back
+    if abs(w) > 1e-9:
+        start = pose[:2] - v / w * np.array([np.sin(pose[2]) - np.sin(yaw0),
+                                             np.cos(yaw0) - np.cos(pose[2])])
+    else:
+        start = pose[:2] - v * back * np.array([np.cos(yaw0), np.sin(yaw0)])
+    base.set_pose([start[0], start[1], yaw0])
+    m, d = base.model, base.data
+    root = m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "root")]
+    d.qvel[root:root + 3] = [v * np.cos(yaw0), v * np.sin(yaw0), 0.0]
+    d.qvel[root + 5] = w
+    for name, side in (("left", -1.0), ("right", 1.0)):
+        dof = m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)]
+        d.qvel[dof] = (v + side * w * HALF_TRACK) / WHEEL_RADIUS
+    mujoco.mj_forward(m, d)
+    for _ in range(steps):
+        obs, _, _, _, info = base.step(np.array([v, w]))
+    return obs["image"], info["pose"]
+
+
 def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n_headings: int = 8,
-                    progress: bool = True) -> tuple[NDArray[np.uint8], NDArray[np.float64]]:
+                    progress: bool = True, **lane_options: Any,
+                    ) -> tuple[NDArray[np.uint8], NDArray[np.float64]]:
     """Collect n camera images with their true poses.
 
     Parameters
     ----------
     env : an AppearanceNav env (wrapped or not).
     n : int — number of samples.
-    mode : "grid", "random" or "route" (see the module docstring).
-    seed : int — seeds the random poses / the env reset for "route".
+    mode : "grid", "random", "route" or "lanes" (see the module docstring).
+    seed : int — seeds the random poses / the env reset for "route" and "lanes".
     n_headings : int — headings per grid position ("grid" only).
     progress : bool — show a tqdm progress bar.
+    **lane_options : keyword arguments of :func:`envs.lanes.lane_poses` ("lanes" only):
+        ``lanes`` ("streets" or "route"), ``lateral``, ``heading``, ``turn_radius``,
+        ``turn_weight``. The poses returned are the true poses reached (within a few mm of
+        the sampled ones).
 
     The env's state is changed (teleports, or a reset and a drive for "route"): reset it
     before running episodes on it.
@@ -120,6 +169,8 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
         raise ValueError(f"unknown mode {mode!r}; known modes: {list(MODES)}")
     if int(n) != n or n < 1:
         raise ValueError(f"n must be a positive integer, got {n}")
+    if lane_options and mode != "lanes":
+        raise ValueError(f"options {sorted(lane_options)} apply to mode 'lanes' only")
     base = env.unwrapped
     city = base.city
     images = np.empty((n, *base.image_size, 3), np.uint8)
@@ -134,6 +185,13 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
             pose = info["pose"]
             images[i], poses[i] = obs["image"], pose
             bar.update()
+    elif mode == "lanes":
+        targets, curvature = lane_poses(city, n, np.random.default_rng(seed),
+                                        margin=POSE_MARGIN, **lane_options)
+        base.reset(seed=seed)  # seeds the motion noise of the drive-in
+        for i, (target, k) in enumerate(zip(targets, curvature)):
+            images[i], poses[i] = _drive_into(base, target, k, ROLL_STEPS)
+            bar.update()
     else:
         if mode == "grid":
             targets = grid_poses(city, n, n_headings)
@@ -146,6 +204,39 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
             bar.update()
     bar.close()
     return images, poses
+
+
+def drive_route(env: gym.Env, n: int, seed: int = 0, start: int = 0, progress: bool = True,
+                ) -> tuple[NDArray[np.uint8], NDArray[np.float64], NDArray[np.float64]]:
+    """Drive n steps around ``city.route()`` with :class:`PurePursuit` on the true pose.
+
+    Parameters
+    ----------
+    env : an AppearanceNav env (wrapped or not); it is reset with ``seed``.
+    n : int — number of steps.
+    seed : int — the env reset (motion noise).
+    start : int — index of the path point to start from (``PurePursuit.path``).
+    progress : bool
+
+    Returns
+    -------
+    images : (n + 1, H, W, 3) uint8 — frame 0 is the reset image.
+    poses : (n + 1, 3) float64 — true poses.
+    controls : (n, 2) float64 — the commanded controls (controls[t] moves poses[t] to poses[t+1]).
+    """
+    if int(n) != n or n < 1:
+        raise ValueError(f"n must be a positive integer, got {n}")
+    base = env.unwrapped
+    pilot = PurePursuit(base.city.route(), w_max=base.W_MAX)
+    obs, info = base.reset(seed=seed, options={"pose": pilot.start_pose(start)})
+    images = np.empty((n + 1, *base.image_size, 3), np.uint8)
+    poses, controls = np.empty((n + 1, 3)), np.empty((n, 2))
+    images[0], poses[0] = obs["image"], info["pose"]
+    for t in tqdm(range(n), desc="drive route", disable=not progress, leave=False):
+        controls[t] = pilot(poses[t])
+        obs, _, _, _, info = base.step(controls[t])
+        images[t + 1], poses[t + 1] = obs["image"], info["pose"]
+    return images, poses, controls
 
 
 def save_dataset(path: str | Path, images: NDArray[np.uint8], poses: NDArray[np.float64], **meta: Any) -> Path:

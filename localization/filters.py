@@ -57,6 +57,11 @@ class MeasurementModel(Protocol):
     def residual(self, z: Array, z_pred: Array) -> Array: ...
 
 
+class OutOfDomainError(ValueError):
+    """The measurement model cannot predict at the state: ``h(x)`` or ``H(x)`` is NaN
+    (e.g. a learned map queried away from its training data). No update is possible."""
+
+
 @dataclass(frozen=True)
 class UpdateResult:
     """Outcome of one :meth:`PoseEKF.update`.
@@ -294,11 +299,18 @@ class PoseEKF(ExtendedKalmanFilter):
 
         Raises
         ------
+        OutOfDomainError
+            If ``h(x)`` or ``H(x)`` is NaN (the model has no prediction at x).
         ValueError
             If z is not finite, or shapes of z, h(x), H(x), R disagree, or R is not symmetric
             positive definite.
         """
-        z_pred = _finite_vector(model.h(self.x), "h(x)")
+        z_pred = np.asarray(model.h(self.x), dtype=np.float64)
+        if z_pred.ndim != 1:
+            raise ValueError(f"h(x) must have shape (dim_z,), got {z_pred.shape}")
+        if np.isnan(z_pred).any():
+            raise OutOfDomainError(f"the measurement model has no prediction at x = {self.x}")
+        z_pred = _finite_vector(z_pred, "h(x)")
         dim_z = z_pred.shape[0]
         z = np.asarray(z, dtype=np.float64)
         if z.shape != (dim_z,):
@@ -308,6 +320,10 @@ class PoseEKF(ExtendedKalmanFilter):
         H = np.asarray(model.H(self.x), dtype=np.float64)
         if H.shape != (dim_z, 3):
             raise ValueError(f"H(x) must have shape {(dim_z, 3)}, got {H.shape}")
+        if np.isnan(H).any():
+            raise OutOfDomainError(f"the measurement model has no Jacobian at x = {self.x}")
+        if not np.all(np.isfinite(H)):
+            raise ValueError("H(x) contains inf")
         R_at = getattr(model, "R_at", None)
         R = _covariance(R_at(self.x) if callable(R_at) else model.R, "R", dim_z)
         y = _finite_vector(model.residual(z, z_pred), "residual(z, z_pred)", dim_z)

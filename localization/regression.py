@@ -339,22 +339,39 @@ class GSERegressor(BaseEstimator):
         """Exact d R*/dtheta (angles in radians), shape (n, q, d)."""
         return self._R_star(Theta, True)[1]
 
+    def _recover(self, Y: Array, cols: slice, jacobian: bool = False
+                 ) -> tuple[Array, Array | None]:
+        """g(Y) on ambient columns ``cols``; rows of Y that are NaN (out of domain with
+        ``out_of_domain="nan"``) stay NaN instead of reaching the KD-tree."""
+        ok = np.all(np.isfinite(Y), axis=1)
+        if ok.all():
+            g, J, _ = self.gse_._recover(Y, cols, jacobian)
+            return g, J
+        p = len(range(*cols.indices(self.gse_.Z_.shape[1])))
+        g = np.full((len(Y), p), np.nan)
+        J = np.full((len(Y), p, Y.shape[1]), np.nan) if jacobian else None
+        if ok.any():
+            g[ok], Jok, _ = self.gse_._recover(Y[ok], cols, jacobian)
+            if J is not None:
+                J[ok] = Jok
+        return g, J
+
     def predict(self, W: Array) -> Array:
         """psi*(w) = g_v(r*(w)): poses (n, d), angles wrapped to (-pi, pi]."""
         r, _ = self._r_star(W, False)
-        zv, _, _ = self.gse_._recover(r, slice(len(self.w_mean_), None))
+        zv, _ = self._recover(r, slice(len(self.w_mean_), None))
         return self._unlift(zv)
 
     def predict_features(self, Theta: Array) -> Array:
         """Phi*(theta) = g_u(R*(theta)): features (n, m) in original units."""
         R, _ = self._R_star(Theta, False)
-        gu, _, _ = self.gse_._recover(R, slice(0, len(self.w_mean_)))
+        gu, _ = self._recover(R, slice(0, len(self.w_mean_)))
         return gu * self.w_scale_ + self.w_mean_
 
     def features_jacobian(self, Theta: Array) -> Array:
         """Exact dPhi*/dtheta (n, m, d) in original units (angles in radians): EKF's H."""
         R, JR = self._R_star(Theta, True)
-        _, Jg, _ = self.gse_._recover(R, slice(0, len(self.w_mean_)), jacobian=True)
+        _, Jg = self._recover(R, slice(0, len(self.w_mean_)), jacobian=True)
         return self.w_scale_ * (Jg @ JR)
 
     # --------------------------------------------------------------- persistence

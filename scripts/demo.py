@@ -3,14 +3,21 @@
 CleanRL style: one file, every setting a field of ``Args`` (``--help`` lists them).
 
     python scripts/demo.py                 # default city (scene seed 0), results/ as output
-    python scripts/demo.py --scene-seed 3 --n-route 1500
+    python scripts/demo.py --scene-seed 3 --lanes route
 
-Stages so far:
+Stages:
 
 1. build the city, drive the robot once around its street loop (``envs.collect_dataset``
-   in "route" mode) and save the dataset to ``<out>/route_dataset.npz``;
-2. write ``<out>/demo_route.png``: the top-down map with the driven route, beside a strip
-   of camera images taken along it.
+   in "route" mode), save the dataset to ``<out>/route_dataset.npz`` and write
+   ``<out>/demo_route.png``: the map with the driven route beside camera images along it;
+2. collect training images around the driving lanes (every street both ways and every turn
+   with ``--lanes streets``, so agents can use the localizer anywhere; only the route's with
+   ``--lanes route``) and fit the :class:`AppearanceLocalizer` (features + GSE); estimate the
+   noise model on a drive around the route and calibrate it on a drive on the belief
+   (``localization.tracking.fit_city_localizer``); save it to ``<out>/localizer.npz``;
+3. closed-loop tracking: for each measurement model drive ``--steps`` steps of the route
+   with a pure-pursuit controller on the belief mean, against dead reckoning; write
+   ``<out>/track_<model>.png`` and print the results table (also ``<out>/demo.md``).
 """
 
 from __future__ import annotations
@@ -30,12 +37,18 @@ if str(ROOT) not in sys.path:
 import envs  # chooses MUJOCO_GL before mujoco is imported
 
 # isort: split
+import warnings
+
 import gymnasium as gym
 import matplotlib
 import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+
+from localization.localizer import MEASUREMENTS
+from localization.plotting import plot_track
+from localization.tracking import fit_city_localizer, track_metrics, track_route
 
 
 @dataclass
@@ -45,8 +58,15 @@ class Args:
         "help": "a registered camera: " + ", ".join(sorted(envs.CAMERAS))})
     image_size: int = field(default=64, metadata={"help": "side of the square camera image"})
     n_route: int = field(default=2500, metadata={"help": "frames driven along the route"})
-    seed: int = field(default=0, metadata={"help": "seed of the route drive"})
+    seed: int = field(default=0, metadata={"help": "seed of the route drive and the fit"})
     strip: int = field(default=8, metadata={"help": "camera images shown in the strip"})
+    motion_noise: float = field(default=0.1, metadata={"help": "env actuation noise"})
+    lanes: str = field(default="streets", metadata={
+        "help": "training lanes: 'streets' (all, both ways) or 'route'"})
+    n_train: int = field(default=20000, metadata={"help": "training images around the lanes"})
+    n_drive: int = field(default=1000, metadata={"help": "steps of each noise drive"})
+    steps: int = field(default=1000, metadata={"help": "steps of each tracking run"})
+    start: int = field(default=0, metadata={"help": "tracking start (route path point)"})
     out: str = field(default="results", metadata={"help": "output folder"})
 
 
@@ -94,22 +114,67 @@ def plot_route(env: gym.Env, images: np.ndarray, poses: np.ndarray, n_strip: int
     return path
 
 
+def results_table(rows: list[dict]) -> str:
+    lines = [("| measurement model | steps | belief RMSE (m) | dead reckoning RMSE (m) | ratio | "
+              "heading RMSE (rad) | mean NEES | accepted | ms/step |"),
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        lines.append(f"| {r['measurement']} | {r['steps']} | {r['rmse']:.3f} | "
+                     f"{r['rmse_dead_reckoning']:.2f} | {r['ratio']:.3f} | {r['yaw_rmse']:.3f} | "
+                     f"{r['nees_mean']:.2f} | {r['accepted']:.2f} | {r['ms_per_step']:.1f} |")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: list[str] | None = None) -> dict:
     args = parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
+    seconds = {}
     env = gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, camera=args.camera,
-                   image_size=(args.image_size, args.image_size))
+                   image_size=(args.image_size, args.image_size),
+                   motion_noise=args.motion_noise, max_episode_steps=None)
     images, poses = envs.collect_dataset(env, args.n_route, "route", seed=args.seed)
     dataset = envs.save_dataset(out / "route_dataset.npz", images, poses,
                                 **dataclasses.asdict(args), dt=env.unwrapped.dt)
     figure = plot_route(env, images, poses, args.strip, out / "demo_route.png")
+    seconds["route"] = time.perf_counter() - t0
+    print(f"[demo] route dataset and map: {seconds['route']:.0f} s", flush=True)
+    with warnings.catch_warnings():  # GSE's eigen-gap warning on a thin tube of poses
+        warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
+        loc, fit_seconds = fit_city_localizer(env, args.n_train, args.lanes, args.n_drive,
+                                              seed=args.seed, progress=True)
+    seconds.update(fit_seconds)
+    loc.save(out / "localizer.npz")
+    print(f"[demo] localizer: {args.n_train} images ({args.lanes} lanes) collected in "
+          f"{fit_seconds['collect']:.0f} s, fitted in {fit_seconds['fit']:.0f} s, noise model "
+          f"in {fit_seconds['noise']:.0f} s", flush=True)
+    t1 = time.perf_counter()
+    rows = []
+    for name in MEASUREMENTS:
+        run = track_route(env, loc, name, args.steps, start=args.start, seed=args.seed + 7)
+        m = track_metrics(run)
+        env.unwrapped.set_pose(run.true[0])  # the map shows the robot at the start
+        png = plot_track(run, env.unwrapped.render(), env.unwrapped.city.bounds,
+                         out / f"track_{name}.png")
+        rows.append({"measurement": name, **m, "png": str(png)})
+        print(f"[demo] {name}: RMSE {m['rmse']:.3f} m vs dead reckoning "
+              f"{m['rmse_dead_reckoning']:.2f} m", flush=True)
+    seconds["track"] = time.perf_counter() - t1
     env.close()
+    table = results_table(rows)
+    (out / "demo.md").write_text(table)
+    seconds["total"] = time.perf_counter() - t0
     summary = {"dataset": str(dataset), "route_png": str(figure), "frames": len(poses),
-               "seconds": round(time.perf_counter() - t0, 1)}
+               "localizer": str(out / "localizer.npz"), "tracking": rows,
+               "control_gain": loc.control_gain_.tolist(),
+               "consistency": {k: v.tolist() for k, v in loc.consistency_.items()},
+               "seconds": {k: round(v, 1) for k, v in seconds.items()}}
     (out / "demo.json").write_text(json.dumps(summary, indent=2))
-    print(json.dumps(summary, indent=2))
+    print(f"\nClosed-loop tracking, city {args.scene_seed}, {args.steps} steps along the route "
+          f"(motion noise {args.motion_noise}; dead reckoning: F alone from the true start):\n")
+    print(table)
+    print(f"[demo] done in {seconds['total']:.0f} s; PNGs and JSON in {out}/")
     return summary
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from envs import AppearanceNavEnv, collect_dataset, load_dataset, save_dataset
-from envs.datasets import grid_poses
+from envs.datasets import drive_route, grid_poses
 
 
 @pytest.fixture(scope="module")
@@ -14,7 +14,7 @@ def env():
     e.close()
 
 
-@pytest.mark.parametrize("mode", ["grid", "random", "route"])
+@pytest.mark.parametrize("mode", ["grid", "random", "route", "lanes"])
 def test_collect_shapes_and_free_poses(env, mode):
     images, poses = collect_dataset(env, 40, mode, seed=0, progress=False)
     assert images.shape == (40, 32, 32, 3) and images.dtype == np.uint8
@@ -25,7 +25,7 @@ def test_collect_shapes_and_free_poses(env, mode):
 
 
 def test_collect_is_deterministic(env):
-    for mode in ("random", "route"):
+    for mode in ("random", "route", "lanes"):
         a = collect_dataset(env, 20, mode, seed=3, progress=False)
         b = collect_dataset(env, 20, mode, seed=3, progress=False)
         assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
@@ -88,3 +88,27 @@ def test_save_validates(tmp_path):
         save_dataset(tmp_path / "x.npz", np.zeros((2, 16, 16, 3), np.uint8), np.zeros((3, 3)))
     with pytest.raises(ValueError, match="JSON"):
         save_dataset(tmp_path / "x.npz", np.zeros((2, 16, 16, 3), np.uint8), np.zeros((2, 3)), bad=object())
+
+
+def test_lanes_are_reached_driving(env):
+    """The "lanes" frames are taken from a moving robot: it pitches, a teleported one does not."""
+    images, poses = collect_dataset(env, 30, "lanes", seed=2, progress=False, lanes="route",
+                                    lateral=0.1, heading=0.05)
+    assert np.linalg.norm(env.data.qvel[:2]) > 0.4  # still rolling at cruise speed
+    env.set_pose(poses[-1])
+    assert not np.array_equal(env.render_camera(), images[-1])
+    with pytest.raises(ValueError, match="lanes"):
+        collect_dataset(env, 5, "random", lanes="route")
+    with pytest.raises(ValueError, match="lanes"):
+        collect_dataset(env, 5, "lanes", lanes="highway")
+
+
+def test_drive_route_records_controls(env):
+    images, poses, controls = drive_route(env, 50, seed=1, start=200, progress=False)
+    assert images.shape == (51, 32, 32, 3) and poses.shape == (51, 3)
+    assert controls.shape == (50, 2)
+    assert np.all(np.abs(controls) <= 1.0)
+    step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+    assert np.all(step < 0.1) and step[5:].mean() > 0.04
+    again = drive_route(env, 50, seed=1, start=200, progress=False)
+    assert all(np.array_equal(a, b) for a, b in zip((images, poses, controls), again))

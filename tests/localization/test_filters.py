@@ -303,3 +303,16 @@ def test_chi2_band() -> None:
     assert lo < 3.0 < hi and (lo, hi) == pytest.approx((2.360, 3.716), abs=1e-3)  # chi2(150) quantiles / 50
     with pytest.raises(ValueError):
         chi2_band(0, 10)
+
+
+def test_nan_prediction_is_out_of_domain_not_a_crash() -> None:
+    from localization.filters import OutOfDomainError
+
+    ekf = PoseEKF(UnicycleModel(DT), Q_TRUE, np.zeros(3), P0)
+    nowhere = FunctionMeasurement(lambda x: np.full(3, np.nan), lambda x: np.eye(3), R_POSE)
+    with pytest.raises(OutOfDomainError, match="no prediction"):
+        ekf.update(np.zeros(3), nowhere)
+    no_jacobian = FunctionMeasurement(lambda x: x, lambda x: np.full((3, 3), np.nan), R_POSE)
+    with pytest.raises(OutOfDomainError, match="no Jacobian"):
+        ekf.update(np.zeros(3), no_jacobian)
+    assert issubclass(OutOfDomainError, ValueError)

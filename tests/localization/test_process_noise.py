@@ -4,6 +4,7 @@ import pytest
 from envs.motion_model import UnicycleModel, wrap_angle
 from localization.process_noise import (
     body_rotation,
+    estimate_control_gain,
     estimate_process_noise,
     prediction_errors,
     world_process_noise,
@@ -64,3 +65,27 @@ def test_episode_boundaries_are_excluded():
 def test_bad_input(poses, controls, match):
     with pytest.raises(ValueError, match=match):
         estimate_process_noise(UnicycleModel(0.1), poses, controls)
+
+
+def test_control_gain_recovers_a_slipping_robot():
+    """True motion F(theta, k U) + small noise: the gains come back, and Q with them is small."""
+    rng = np.random.default_rng(1)
+    model = UnicycleModel(0.1)
+    k_true = np.array([0.95, 0.9])
+    controls = rng.uniform([0.2, -1.0], [1.0, 1.0], (600, 2))
+    poses = [np.array([1.0, -2.0, 0.5])]
+    for u in controls:
+        p = model.predict(poses[-1], k_true * u) + rng.normal(0, [1e-4, 1e-4, 1e-4])
+        p[2] = wrap_angle(p[2])
+        poses.append(p)
+    poses = np.array(poses)
+    k = estimate_control_gain(model, poses, controls)
+    assert np.allclose(k, k_true, atol=2e-3)
+    Q_raw = estimate_process_noise(model, poses, controls)
+    Q_cal = estimate_process_noise(model, poses, controls * k)
+    assert np.trace(Q_cal) < 0.01 * np.trace(Q_raw)
+
+
+def test_control_gain_of_an_unbiased_model_is_one():
+    model, poses, controls = _drive(np.diag([1e-6, 1e-6, 1e-6]), n=500)
+    assert np.allclose(estimate_control_gain(model, poses, controls), 1.0, atol=0.01)

@@ -1,0 +1,73 @@
+"""Persistence of :class:`~localization.localizer.AppearanceLocalizer` (one npz, no pickles).
+
+Settings go in a JSON string; the feature extractor's state, the GSE regressor (its own npz,
+stored as bytes) and the noise model as named arrays.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from localization.features import features_from_state
+from localization.regression import GSERegressor
+
+FORMAT = "appearance-nav-localizer/2"
+_GROUPS = ("noise", "rms", "tau", "consistency")
+_ATTRS = {"noise": "noise_", "rms": "residual_rms_", "tau": "correlation_time_",
+          "consistency": "consistency_"}
+
+
+def save_localizer(loc: Any, path: str | Path) -> None:
+    """Write a fitted localizer to ``path`` (``np.savez_compressed``)."""
+    buf = io.BytesIO()
+    loc.regressor_.save(buf)
+    settings = {"format": FORMAT, "params": loc.get_params(), "camera": loc.camera_,
+                "image_size": list(loc.image_size_), "yaw_cut_": loc.yaw_cut_}
+    arrays = {f"features/{k}": v for k, v in loc.features_.get_state().items()}
+    for group in _GROUPS:
+        arrays |= {f"{group}/{k}": v for k, v in getattr(loc, _ATTRS[group]).items()}
+    arrays["control_gain"] = loc.control_gain_
+    if getattr(loc, "initial_noise_", None) is not None:
+        arrays["initial_noise"] = loc.initial_noise_
+    if loc.process_noise_body_ is not None:
+        arrays["process_noise_body"] = loc.process_noise_body_
+    np.savez_compressed(path, settings=np.array(json.dumps(settings)),
+                        regressor=np.frombuffer(buf.getvalue(), dtype=np.uint8), **arrays)
+
+
+def load_localizer(cls: type, path: str | Path) -> Any:
+    """Rebuild a localizer written by :func:`save_localizer`; ValueError if the file is not
+    one, or is corrupted or incomplete."""
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            data = {k: f[k] for k in f.files}
+        settings = json.loads(str(data.pop("settings")))
+    except Exception as err:  # OSError, zipfile, EOFError, JSON, missing key
+        raise ValueError(f"{path} is not a saved AppearanceLocalizer: {err}") from err
+    if settings.get("format") != FORMAT:
+        raise ValueError(f"{path}: unknown format {settings.get('format')!r} (want {FORMAT})")
+    try:
+        params = dict(settings["params"])
+        params["rows"] = tuple(params["rows"])
+        loc = cls(**params)
+        loc.camera_ = settings["camera"]
+        loc.image_size_ = tuple(int(s) for s in settings["image_size"])
+        loc.yaw_cut_ = float(settings["yaw_cut_"])
+        loc.features_ = features_from_state(
+            {k[len("features/"):]: v for k, v in data.items() if k.startswith("features/")})
+        loc.regressor_ = GSERegressor.load(io.BytesIO(data["regressor"].tobytes()))
+        for group in _GROUPS:
+            setattr(loc, _ATTRS[group], {k[len(group) + 1:]: v for k, v in data.items()
+                                         if k.startswith(group + "/")})
+        loc.control_gain_ = np.asarray(data["control_gain"], dtype=np.float64)
+        loc.process_noise_body_ = data.get("process_noise_body")
+        loc.initial_noise_ = data.get("initial_noise")
+    except Exception as err:
+        raise ValueError(f"{path}: corrupted or incomplete localizer "
+                         f"({type(err).__name__}: {err})") from err
+    return loc

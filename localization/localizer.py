@@ -1,0 +1,338 @@
+"""AppearanceLocalizer: images -> features -> GSE regression -> pose, with noise models.
+
+It bundles what a filter needs to localize from images (seed paper section III.D):
+
+- an image region (rows of the image) and a feature extractor ``omega``
+  (:mod:`localization.features`);
+- a :class:`~localization.regression.GSERegressor` giving psi* (features -> pose),
+  Phi* (pose -> features) and the representation maps r*, R*;
+- measurement noise covariances R of the three measurement models, estimated from
+  held-out residuals (:mod:`localization.measurement_noise`): robustly
+  (:class:`sklearn.covariance.MinCovDet`, so the rare aliasing errors do not inflate R; the
+  filter's NIS gate rejects those at run time), in the body frame (along track, cross
+  track, heading) for the pose-like models. :meth:`AppearanceLocalizer.fit` takes them from
+  K-fold refits on the training data; :meth:`AppearanceLocalizer.fit_noise` from a recorded
+  drive (held out from the fit), inflated by the residuals' correlation time, and then
+  calibrates the filter's consistency on that drive;
+- the control gains and body-frame process noise ``Q_body`` of the motion model F,
+  estimated from recorded motion (:mod:`localization.process_noise`).
+
+The three measurement models (chosen by name in :meth:`AppearanceLocalizer.measurement_model`):
+
+====================  ==================  ===================  ========================
+name                  z                   h(theta)             H
+====================  ==================  ===================  ========================
+``"pose"``            psi*(w)             theta                I (3 x 3)
+``"features"``        w                   Phi*(theta)          dPhi*/dtheta (m x 3)
+``"representation"``  r*(w)               R*(theta)            dR*/dtheta (q x 3)
+====================  ==================  ===================  ========================
+
+The heading is periodic and GSE cuts its circle open at +-pi (spec gse.md section 9):
+a neighbourhood graph must not link samples across the cut, so every street driven
+along heading ~pi would be split lengthwise into two halves. The localizer therefore
+fits GSE on a rotated heading ``yaw - yaw_cut_ + pi`` whose cut lies at the heading
+where the training poses are sparsest (``yaw_cut="auto"``; on a street grid: a diagonal,
+crossed only in the middle of turns).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from sklearn.exceptions import NotFittedError
+
+from envs.motion_model import wrap_angle
+from localization._localizer_io import load_localizer, save_localizer
+from localization._localizer_noise import MEASUREMENTS, NoiseModelMixin, check_data
+from localization.features import make_features
+from localization.filters import FunctionMeasurement, pose_residual
+from localization.measurement_noise import body_to_world, inflate
+from localization.process_noise import world_process_noise
+from localization.regression import GSERegressor
+
+Array = NDArray[np.float64]
+_YAW_BINS = 72
+
+
+def sparsest_heading(yaw: ArrayLike, bins: int = _YAW_BINS) -> float:
+    """Centre of the least populated of ``bins`` equal heading bins (ties: the first)."""
+    counts, edges = np.histogram(wrap_angle(np.asarray(yaw)), bins=bins, range=(-np.pi, np.pi))
+    i = int(np.argmin(counts))
+    return float(0.5 * (edges[i] + edges[i + 1]))
+
+
+class AppearanceLocalizer(NoiseModelMixin):
+    """Localize a camera from its images: image rows + features + GSE regression + noise.
+
+    Parameters
+    ----------
+    features : str
+        Feature extractor name for :func:`localization.features.make_features`
+        ("pixel_pca", "efficientnet", "small_cnn").
+    features_params : dict, optional
+        Keyword arguments of the extractor.
+    rows : (float, float)
+        Fractions ``[start, stop)`` of the image height fed to the features. The default
+        ``(0.0, 0.55)`` keeps the horizon and what is above it: the road just in front of
+        a low camera (lane stripes, crosswalks) makes features change fast with small
+        translations, which local regression cannot follow.
+    regressor_params : dict, optional
+        Keyword arguments of :class:`GSERegressor` (``periodic=(2,)`` and
+        ``out_of_domain="nan"`` are always set).
+    noise_folds : int
+        Folds of the held-out residuals that estimate R in :meth:`fit` (>= 2), or 0 to
+        skip them (R then comes from :meth:`fit_noise`).
+    yaw_cut : "auto" or float
+        Heading (rad) where GSE cuts the heading circle; "auto" = the sparsest heading
+        of the training poses.
+    random_state : int
+        Seed of the fold split and the robust covariance.
+
+    Attributes
+    ----------
+    features_, regressor_ :
+        The fitted extractor and :class:`GSERegressor` (on poses with the rotated heading).
+    yaw_cut_ : float
+    noise_ : dict of str -> ndarray
+        R per measurement model: "pose" and "representation" (3, 3) pose-error covariances
+        in the body frame, "features" (m, m); inflated by ``correlation_time_``.
+    initial_noise_ : ndarray (3, 3)
+        Plain (not robust) second moment of the pose residuals in the body frame: the
+        covariance of the initial belief, which must cover psi*'s rare metre-scale errors.
+    correlation_time_, residual_rms_ : dict of str -> ndarray
+        Per-component correlation time (1 for K-fold residuals) and plain residual RMS.
+    consistency_ : dict of str -> ndarray (3,)
+        Body-frame inflation of Q, R and P0 per measurement model (:meth:`fit_noise`).
+    control_gain_ : ndarray (2,)
+    process_noise_body_ : ndarray (3, 3) or None
+    camera_ : str or None
+    image_size_ : (int, int)
+    """
+
+    def __init__(self, features: str = "pixel_pca", features_params: dict | None = None,
+                 rows: tuple[float, float] = (0.0, 0.55), regressor_params: dict | None = None,
+                 noise_folds: int = 3, yaw_cut: str | float = "auto",
+                 random_state: int = 0) -> None:
+        self.features = features
+        self.features_params = features_params
+        self.rows = rows
+        self.regressor_params = regressor_params
+        self.noise_folds = noise_folds
+        self.yaw_cut = yaw_cut
+        self.random_state = random_state
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, images: ArrayLike, poses: ArrayLike, *, camera: str | None = None
+            ) -> AppearanceLocalizer:
+        """Fit features, the GSE regression and (``noise_folds >= 2``) the measurement noise.
+
+        Parameters
+        ----------
+        images : ndarray of shape (n, H, W, 3), uint8
+        poses : ndarray of shape (n, 3)
+            True poses [x, y, yaw] where the images were taken.
+        camera : str, optional
+            Camera name of the env that made the images (the wrapper checks it).
+
+        Returns
+        -------
+        self
+        """
+        images, poses = check_data(images, poses)
+        self._row_slice(images.shape[1])  # validates rows
+        if int(self.noise_folds) < 0 or int(self.noise_folds) == 1:
+            raise ValueError(f"noise_folds must be 0 or >= 2, got {self.noise_folds}")
+        if isinstance(self.yaw_cut, str):
+            if self.yaw_cut != "auto":
+                raise ValueError(f"yaw_cut must be 'auto' or a number, got {self.yaw_cut!r}")
+            self.yaw_cut_ = sparsest_heading(poses[:, 2])
+        else:
+            self.yaw_cut_ = float(wrap_angle(float(self.yaw_cut)))
+        self.camera_ = camera
+        self.image_size_ = (int(images.shape[1]), int(images.shape[2]))
+        self.features_ = make_features(self.features, **(self.features_params or {}))
+        W = self.features_.fit_transform(self._crop(images), poses)  # only small_cnn uses poses
+        self.regressor_ = self._new_regressor().fit(W, self._to_model(poses))
+        self.noise_: dict[str, Array] = {}
+        self.correlation_time_: dict[str, Array] = {}
+        self.residual_rms_: dict[str, Array] = {}
+        self.consistency_: dict[str, Array] = {}
+        self.initial_noise_: Array | None = None
+        if int(self.noise_folds) >= 2:
+            self._set_noise(self._k_fold_residuals(W, poses), sequence=False)
+        self.process_noise_body_: Array | None = None
+        self.control_gain_ = np.ones(2)
+        return self
+
+    def _row_slice(self, height: int) -> slice:
+        a, b = (float(r) for r in self.rows)
+        if not 0.0 <= a < b <= 1.0:
+            raise ValueError(f"rows must be fractions 0 <= start < stop <= 1, got {self.rows}")
+        start = round(a * height)
+        return slice(start, max(round(b * height), start + 1))
+
+    def _crop(self, images: NDArray[np.uint8]) -> NDArray[np.uint8]:
+        return np.ascontiguousarray(images[:, self._row_slice(images.shape[1])])
+
+    def _to_model(self, poses: ArrayLike) -> Array:
+        """World poses -> the regressor's poses (heading rotated so the cut is at +-pi)."""
+        out = np.array(poses, dtype=np.float64, copy=True).reshape(-1, 3)
+        out[:, 2] = wrap_angle(out[:, 2] - self.yaw_cut_ + np.pi)
+        return out
+
+    def _from_model(self, theta: ArrayLike) -> Array:
+        out = np.array(theta, dtype=np.float64, copy=True).reshape(-1, 3)
+        out[:, 2] = wrap_angle(out[:, 2] + self.yaw_cut_ - np.pi)
+        return out
+
+    def _new_regressor(self) -> GSERegressor:
+        params = {**(self.regressor_params or {}), "periodic": (2,), "out_of_domain": "nan"}
+        return GSERegressor(**params)
+
+    # -------------------------------------------------------------- predict
+    def _check_fitted(self, noise: bool = False) -> None:
+        if not hasattr(self, "regressor_"):
+            raise NotFittedError("this AppearanceLocalizer is not fitted yet: call fit() first")
+        if noise and set(self.noise_) != set(MEASUREMENTS):
+            raise NotFittedError("no measurement noise: fit with noise_folds >= 2 or call "
+                                 "fit_noise()")
+
+    def check_images(self, images: ArrayLike) -> NDArray[np.uint8]:
+        """Validate an image (H, W, 3) or batch (n, H, W, 3) against the fitted image size."""
+        self._check_fitted()
+        images = np.asarray(images)
+        if images.ndim == 3:
+            images = images[None]
+        if images.ndim != 4 or images.shape[-1] != 3:
+            raise ValueError(f"images must have shape (n, H, W, 3), got {images.shape}")
+        if tuple(images.shape[1:3]) != tuple(self.image_size_):
+            raise ValueError(f"the localizer was fitted on {tuple(self.image_size_)} images, "
+                             f"got {tuple(images.shape[1:3])}")
+        if images.dtype != np.uint8:
+            raise ValueError(f"images must be uint8, got {images.dtype}")
+        return images
+
+    def transform(self, images: ArrayLike) -> Array:
+        """Features w = omega(X) of images, shape (n, m)."""
+        crop = self._crop(self.check_images(images))
+        return self.features_.transform(crop)
+
+    def predict(self, images: ArrayLike) -> Array:
+        """psi*(X): poses (n, 3) of images (n, H, W, 3); NaN rows for images whose
+        features lie outside the training domain."""
+        W = self.transform(images)
+        return self._from_model(self.regressor_.predict(W))
+
+    def measure(self, w: ArrayLike, measurement: str) -> Array:
+        """The measurement z of the named model from one feature vector w (m,).
+
+        NaN entries mean that w lies outside the training domain (no measurement).
+        """
+        self._check_fitted()
+        w = np.asarray(w, dtype=np.float64).reshape(1, -1)
+        if not np.all(np.isfinite(w)):
+            raise ValueError("features contain NaN or inf")
+        if measurement == "pose":
+            return self._from_model(self.regressor_.predict(w))[0]
+        if measurement == "features":
+            return w[0].copy()
+        if measurement == "representation":
+            return self.regressor_.embed(w)[0]
+        raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
+
+    def consistency(self, measurement: str) -> Array:
+        """Calibrated body-frame inflation (3,) of the model (ones when not calibrated)."""
+        return np.asarray(getattr(self, "consistency_", {}).get(measurement, np.ones(3)))
+
+    def measurement_model(self, measurement: str, alpha: ArrayLike | None = None
+                          ) -> FunctionMeasurement:
+        """The filter's measurement model (h, H, R, residual) of the named kind.
+
+        "pose": ``h(x) = x``, ``H = I``, ``R(x) = T(yaw) R_body T(yaw)^T``;
+        "representation": ``h = R*``, ``H = dR*/dtheta``, ``R(x) = H T R_body T^T H^T``
+        (R_body: the pose-equivalent noise in the body frame); "features": ``h = Phi*``,
+        ``H = dPhi*/dtheta``, a constant R. R_body is inflated by ``alpha`` (default the
+        calibrated ``consistency(measurement)``), the features' R by its mean. ``h`` and
+        ``H`` are NaN outside the training domain.
+        """
+        self._check_fitted(noise=True)
+        if measurement not in MEASUREMENTS:
+            raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
+        alpha = self.consistency(measurement) if alpha is None else np.asarray(alpha, float)
+        reg, to_model = self.regressor_, self._to_model
+        if measurement == "features":
+            return FunctionMeasurement(
+                h=lambda x: reg.predict_features(to_model(x))[0],
+                H=lambda x: reg.features_jacobian(to_model(x))[0],
+                R=self.noise_["features"] * float(np.mean(alpha)))
+        R = inflate(self.noise_[measurement], alpha)
+        if measurement == "pose":
+            return FunctionMeasurement(h=lambda x: np.array(x, dtype=np.float64),
+                                       H=lambda x: np.eye(3),
+                                       R=lambda x: body_to_world(R, float(x[2])),
+                                       residual=pose_residual)
+        cache: dict[str, Array] = {}
+
+        def H(x: Array) -> Array:  # the filter asks for H and R at the same x
+            if "x" not in cache or not np.array_equal(cache["x"], x):
+                cache["x"], cache["H"] = np.array(x), reg.embed_pose_jacobian(to_model(x))[0]
+            return cache["H"]
+
+        def R_rep(x: Array) -> Array:
+            Hx = H(x)
+            return Hx @ body_to_world(R, float(x[2])) @ Hx.T
+
+        return FunctionMeasurement(h=lambda x: reg.embed_pose(to_model(x))[0], H=H, R=R_rep)
+
+    def initial_belief(self, w: ArrayLike) -> tuple[Array, Array]:
+        """Belief (mean (3,), covariance (3, 3)) from one image's features: psi*(w) with the
+        plain second moment of psi*'s residuals at that heading (``initial_noise_``: unlike
+        R it counts the rare aliasing errors, which a single image cannot be gated
+        against). The mean is NaN when w is out of the training domain."""
+        self._check_fitted(noise=True)
+        x0 = self.measure(w, "pose")
+        yaw = float(x0[2]) if np.isfinite(x0[2]) else 0.0
+        return x0, body_to_world(self.initial_noise_, yaw)
+
+    def prior(self) -> tuple[Array, Array]:
+        """Mean (3,) and covariance (3, 3) of the training poses: a know-nothing belief."""
+        self._check_fitted()
+        poses = self._from_model(self.regressor_.theta_)
+        return (np.array([*poses[:, :2].mean(axis=0), 0.0]),
+                np.diag([*poses[:, :2].var(axis=0), np.pi ** 2 / 3.0]))
+
+    def process_noise(self, pose: ArrayLike, alpha: ArrayLike | None = None) -> Array:
+        """Q(x) (3, 3) in the world frame at ``pose``: ``T(yaw) Q_body T(yaw)^T`` with
+        Q_body inflated by ``alpha`` (default none)."""
+        if getattr(self, "process_noise_body_", None) is None:
+            raise NotFittedError("process noise not estimated: call fit_noise() or "
+                                 "fit_process_noise() first")
+        Q = self.process_noise_body_ if alpha is None else inflate(self.process_noise_body_, alpha)
+        return world_process_noise(Q, pose)
+
+    # ---------------------------------------------------------------- save
+    def get_params(self) -> dict[str, Any]:
+        """Constructor arguments (JSON-friendly)."""
+        return {"features": self.features, "features_params": self.features_params,
+                "rows": list(self.rows), "regressor_params": self.regressor_params,
+                "noise_folds": self.noise_folds, "yaw_cut": self.yaw_cut,
+                "random_state": self.random_state}
+
+    def save(self, path: str | Path) -> None:
+        """Save to one ``.npz`` (no pickle): settings as JSON, arrays by name."""
+        self._check_fitted()
+        save_localizer(self, path)
+
+    @classmethod
+    def load(cls, path: str | Path) -> AppearanceLocalizer:
+        """Load a localizer written by :meth:`save` (``allow_pickle=False``).
+
+        Raises
+        ------
+        ValueError
+            If the file is not a saved localizer, is corrupted or incomplete.
+        """
+        return load_localizer(cls, path)

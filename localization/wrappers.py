@@ -1,0 +1,314 @@
+"""Pose-belief observation wrappers: the GSE belief, an oracle and dead reckoning.
+
+All three turn the env's observation ``Dict(image, goal)`` into the same space
+
+    Dict(pose_mean=Box((3,)), pose_cov=Box((6,)), goal=Box((2,)))      (+ image with keep_image)
+
+``pose_mean = [x, y, yaw]`` (yaw wrapped to (-pi, pi]) and ``pose_cov`` the upper triangle of
+the (3, 3) covariance row by row: ``[Pxx, Pxy, Pxyaw, Pyy, Pyyaw, Pyawyaw]``
+(:func:`cov_to_triu` / :func:`triu_to_cov`). An agent trained on one pose source runs on the
+others unchanged.
+
+- :class:`BeliefWrapper`: the EKF of :mod:`localization.filters` on an
+  :class:`~localization.localizer.AppearanceLocalizer`: predict with the known motion model F
+  and the commanded action, update with a GSE measurement model of the image, NIS-gated. The
+  true pose is never used by the belief.
+- :class:`OracleWrapper`: the true pose with a small fixed covariance (an upper bound).
+- :class:`DeadReckoningWrapper`: F alone from the true start pose, covariance growing with Q.
+
+Every wrapper adds ``info["nees"]`` from ``info["pose"]`` (evaluation only).
+"""
+
+from __future__ import annotations
+
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import ArrayLike, NDArray
+from sklearn.exceptions import NotFittedError
+
+from envs.motion_model import wrap_angle
+from localization.belief import BeliefFilter
+from localization.filters import PoseEKF
+from localization.localizer import MEASUREMENTS, AppearanceLocalizer
+from localization.process_noise import world_process_noise
+
+Array = NDArray[np.float64]
+_TRIU = np.triu_indices(3)
+
+
+def cov_to_triu(P: ArrayLike) -> NDArray[np.float32]:
+    """The upper triangle (6,) of a (3, 3) covariance, row by row, float32."""
+    return np.asarray(P, dtype=np.float64)[_TRIU].astype(np.float32)
+
+
+def triu_to_cov(v: ArrayLike) -> Array:
+    """Inverse of :func:`cov_to_triu`: (..., 6) -> (..., 3, 3) float64."""
+    v = np.asarray(v, dtype=np.float64)
+    if v.shape[-1] != 6:
+        raise ValueError(f"need (..., 6) upper-triangle entries, got shape {v.shape}")
+    P = np.zeros(v.shape[:-1] + (3, 3))
+    P[..., _TRIU[0], _TRIU[1]] = v
+    P[..., _TRIU[1], _TRIU[0]] = v
+    return P
+
+
+def _nees(mean: Array, P: Array, pose: ArrayLike) -> float:
+    e = np.asarray(pose, dtype=np.float64) - mean
+    e[2] = wrap_angle(e[2])
+    return float(e @ np.linalg.solve(P, e))
+
+
+class _PoseObservation(gym.ObservationWrapper):
+    """Shared part: the belief Dict space and the observation from a mean and covariance."""
+
+    def __init__(self, env: gym.Env, keep_image: bool) -> None:
+        gym.ObservationWrapper.__init__(self, env)
+        space = env.observation_space
+        if not (isinstance(space, spaces.Dict) and "image" in space.spaces
+                and "goal" in space.spaces):
+            raise ValueError(f"the env must observe Dict(image, goal), got {space}")
+        self.keep_image = keep_image
+        belief = {"pose_mean": spaces.Box(-np.inf, np.inf, (3,), np.float32),
+                  "pose_cov": spaces.Box(-np.inf, np.inf, (6,), np.float32),
+                  "goal": space["goal"]}
+        if keep_image:
+            belief["image"] = space["image"]
+        self.observation_space = spaces.Dict(belief)
+        self.mean: Array | None = None
+        self.cov: Array | None = None
+
+    def observation(self, observation: dict[str, Any]) -> dict[str, Any]:
+        """The belief observation from the env's observation and the current belief."""
+        if self.mean is None or self.cov is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        out = {"pose_mean": self.mean.astype(np.float32), "pose_cov": cov_to_triu(self.cov),
+               "goal": observation["goal"]}
+        if self.keep_image:
+            out["image"] = observation["image"]
+        return out
+
+    def _control(self, action: Any) -> Array:
+        space = self.env.action_space
+        return np.clip(np.asarray(action, dtype=np.float64), space.low, space.high)
+
+    def _add_nees(self, info: dict[str, Any]) -> None:
+        if "pose" in info and self.mean is not None and self.cov is not None:
+            info["nees"] = _nees(self.mean, self.cov, info["pose"])
+
+
+class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
+    """Replace the image observation by an EKF pose belief from appearance.
+
+    Each step: the prior ``x = F(x, k U)``, ``P = F P F^T + Q(x)`` with the commanded
+    (clipped) action U and the localizer's control gains k, then the EKF update with the
+    measurement of the chosen model from the new image, rejected when
+    ``NIS > chi2.ppf(gate_probability, dim z)`` or when the GSE maps have no value there
+    (out of the training domain); see :class:`~localization.belief.BeliefFilter`. The initial
+    belief is psi* of the first image with the pose measurement noise: the true pose is
+    never used.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        An ``AppearanceNav-v0`` env (Dict observation with ``image`` and ``goal``;
+        ``env.unwrapped.motion_model`` is F).
+    localizer : AppearanceLocalizer
+        Fitted for the same camera and image size, with its noise model
+        (:meth:`~localization.localizer.AppearanceLocalizer.fit_noise`).
+    measurement : {"pose", "features", "representation"}
+        The measurement model of the EKF update.
+    keep_image : bool
+        Also pass the image through in the observation.
+    gate_probability : float or None
+        Chi-square probability of the NIS gate (None disables gating).
+    relocalize_after : int or None
+        After this many consecutive steps without an accepted measurement the belief is
+        re-initialised from psi* of the current image (as at reset); None never does.
+    inflate_after : int or None
+        From this many consecutive gated measurements on, P is inflated each step so the
+        gate widens (see :class:`~localization.belief.BeliefFilter`); None never does.
+
+    Notes
+    -----
+    ``info`` gets ``nis`` (NaN when none was computed), ``nis_dof`` (the measurement
+    dimension), ``measurement_status`` ("initial", "accepted", "gated", "out_of_domain" or
+    "relocalized") and ``nees`` (from ``info["pose"]``, for evaluation only).
+    """
+
+    def __init__(self, env: gym.Env, localizer: AppearanceLocalizer,
+                 measurement: str = "representation", keep_image: bool = False,
+                 gate_probability: float | None = 0.997, relocalize_after: int | None = 50,
+                 inflate_after: int | None = 3) -> None:
+        gym.utils.RecordConstructorArgs.__init__(
+            self, localizer=localizer, measurement=measurement, keep_image=keep_image,
+            gate_probability=gate_probability, relocalize_after=relocalize_after,
+            inflate_after=inflate_after)
+        if measurement not in MEASUREMENTS:
+            raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
+        _PoseObservation.__init__(self, env, keep_image)
+        self._check_compatible(env, localizer)
+        self.localizer = localizer
+        self.measurement = measurement
+        self.belief = BeliefFilter(localizer, env.unwrapped.motion_model, measurement,
+                                   gate_probability, relocalize_after,
+                                   inflate_after=inflate_after)
+        self._dof = int(np.asarray(self.belief.model.R_at(np.zeros(3))).shape[0]) \
+            if measurement == "features" else 3
+
+    @staticmethod
+    def _check_compatible(env: gym.Env, localizer: AppearanceLocalizer) -> None:
+        if not hasattr(localizer, "regressor_"):
+            raise NotFittedError("the localizer is not fitted: call localizer.fit() first")
+        if getattr(localizer, "process_noise_body_", None) is None:
+            raise NotFittedError("the localizer has no process noise: call "
+                                 "localizer.fit_noise() first")
+        image_shape = tuple(env.observation_space["image"].shape[:2])
+        if image_shape != tuple(localizer.image_size_):
+            raise ValueError(f"the localizer was fitted on {tuple(localizer.image_size_)} "
+                             f"images but the env renders {image_shape}")
+        camera = getattr(env.unwrapped, "camera_name", None)
+        if localizer.camera_ is not None and camera is not None and camera != localizer.camera_:
+            raise ValueError(f"the localizer was fitted for camera {localizer.camera_!r} "
+                             f"but the env uses {camera!r}")
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None,
+              ) -> tuple[dict[str, Any], dict[str, Any]]:
+        """Reset the env; the initial belief is psi* of the first image with its noise.
+
+        If the first image is outside the training domain the belief starts at the centre
+        of the training poses with their spread as covariance (status "out_of_domain").
+        """
+        obs, info = self.env.reset(seed=seed, options=options)
+        status = self.belief.reset(self.localizer.transform(obs["image"])[0])
+        self._publish(info, np.nan, status)
+        return self.observation(obs), info
+
+    def step(self, action: Any) -> tuple[dict[str, Any], SupportsFloat, bool, bool,
+                                         dict[str, Any]]:
+        """Step the env, then predict with F(x, k U) and update with the new image."""
+        if self.belief.ekf is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        nis, status = self.belief.step(self._control(action),
+                                       self.localizer.transform(obs["image"])[0])
+        self._publish(info, nis, status)
+        return self.observation(obs), reward, terminated, truncated, info
+
+    @property
+    def ekf(self) -> PoseEKF | None:
+        """The underlying filter (None before reset)."""
+        return self.belief.ekf
+
+    def _publish(self, info: dict[str, Any], nis: float, status: str) -> None:
+        self.mean, self.cov = self.belief.x, self.belief.P
+        info["nis"] = float(nis)
+        info["nis_dof"] = self._dof
+        info["measurement_status"] = status
+        self._add_nees(info)
+
+
+class OracleWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
+    """The true pose as the belief, with a fixed small covariance (an upper bound).
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        Reports the true pose in ``info["pose"]``.
+    std : (float, float, float)
+        Standard deviations of x, y (m) and yaw (rad) put in ``pose_cov``.
+    keep_image : bool
+    """
+
+    def __init__(self, env: gym.Env, std: tuple[float, float, float] = (0.01, 0.01, 0.005),
+                 keep_image: bool = False) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, std=std, keep_image=keep_image)
+        _PoseObservation.__init__(self, env, keep_image)
+        std_a = np.asarray(std, dtype=np.float64)
+        if std_a.shape != (3,) or not np.all(np.isfinite(std_a)) or np.any(std_a <= 0):
+            raise ValueError(f"std must be 3 positive numbers, got {std}")
+        self._P = np.diag(std_a ** 2)
+
+    def _set(self, info: dict[str, Any]) -> None:
+        if "pose" not in info:
+            raise KeyError("OracleWrapper needs info['pose'] from the env")
+        self.mean, self.cov = np.asarray(info["pose"], dtype=np.float64).copy(), self._P.copy()
+        self._add_nees(info)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None,
+              ) -> tuple[dict[str, Any], dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._set(info)
+        return self.observation(obs), info
+
+    def step(self, action: Any) -> tuple[dict[str, Any], SupportsFloat, bool, bool,
+                                         dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self._set(info)
+        return self.observation(obs), reward, terminated, truncated, info
+
+
+class DeadReckoningWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
+    """Dead reckoning: the motion model F alone from the true start pose.
+
+    ``x = F(x, U)``, ``P = F P F^T + Q(x)`` every step with the commanded (clipped) action;
+    ``Q(x) = T(yaw) Q_body T(yaw)^T`` (:func:`localization.process_noise.world_process_noise`).
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        Reports the true pose in ``info["pose"]`` at reset (used once, for the start).
+    process_noise_body : array_like (3, 3)
+        Body-frame process noise ``Q_body``, e.g. ``localizer.process_noise_body_``.
+    initial_std : (float, float, float)
+        Standard deviations of the start pose (x, y, yaw) in ``pose_cov`` at reset.
+    control_gain : (float, float)
+        Calibrated control gains k: F predicts with ``k U`` (``localizer.control_gain_``).
+    keep_image : bool
+    """
+
+    def __init__(self, env: gym.Env, process_noise_body: ArrayLike,
+                 initial_std: tuple[float, float, float] = (0.01, 0.01, 0.005),
+                 control_gain: tuple[float, float] = (1.0, 1.0),
+                 keep_image: bool = False) -> None:
+        gym.utils.RecordConstructorArgs.__init__(
+            self, process_noise_body=process_noise_body, initial_std=initial_std,
+            control_gain=control_gain, keep_image=keep_image)
+        _PoseObservation.__init__(self, env, keep_image)
+        std = np.asarray(initial_std, dtype=np.float64)
+        if std.shape != (3,) or not np.all(np.isfinite(std)) or np.any(std <= 0):
+            raise ValueError(f"initial_std must be 3 positive numbers, got {initial_std}")
+        self._P0 = np.diag(std ** 2)
+        Q = np.asarray(process_noise_body, dtype=np.float64)
+        if Q.shape != (3, 3) or not np.all(np.isfinite(Q)):
+            raise ValueError(f"process_noise_body must be a finite (3, 3) matrix, got {Q.shape}")
+        self.process_noise_body = Q
+        gain = np.asarray(control_gain, dtype=np.float64)
+        if gain.shape != (2,) or not np.all(np.isfinite(gain)):
+            raise ValueError(f"control_gain must be 2 finite numbers, got {control_gain}")
+        self.control_gain = gain
+        self.motion_model = env.unwrapped.motion_model
+        self.ekf: PoseEKF | None = None
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None,
+              ) -> tuple[dict[str, Any], dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        if "pose" not in info:
+            raise KeyError("DeadReckoningWrapper needs info['pose'] from the env at reset")
+        Q = lambda x, u: world_process_noise(self.process_noise_body, x)
+        self.ekf = PoseEKF(self.motion_model, Q, info["pose"], self._P0, gate_probability=None)
+        self.mean, self.cov = self.ekf.x.copy(), self.ekf.P.copy()
+        self._add_nees(info)
+        return self.observation(obs), info
+
+    def step(self, action: Any) -> tuple[dict[str, Any], SupportsFloat, bool, bool,
+                                         dict[str, Any]]:
+        if self.ekf is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.ekf.predict(self.control_gain * self._control(action))
+        self.mean, self.cov = self.ekf.x.copy(), self.ekf.P.copy()
+        self._add_nees(info)
+        return self.observation(obs), reward, terminated, truncated, info
