@@ -76,7 +76,7 @@ class NavigationFeatures:
     def __call__(self, obs: Mapping[str, Any]) -> dict[str, NDArray[np.float32]]:
         """The policy observation for one belief observation."""
         mean, cov, goal = check_belief_observation(obs)
-        path = self.navigator.update(mean[:2], goal)
+        path = self.navigator.update(mean, goal)
         ahead = np.array([path.ahead(d) for d in self.lookaheads])
         std = np.sqrt(np.clip(cov[_DIAG], 0.0, None))
         return {

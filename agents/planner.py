@@ -3,8 +3,17 @@
 The street graph of :meth:`envs.scene.City.street_graph` has the intersections as nodes and
 the straight street segments between them as edges. :class:`StreetPlanner` joins a start
 and a goal to it (each at its nearest point on a street centreline) and runs Dijkstra
-(``scipy.sparse.csgraph.shortest_path``) over the result, giving a polyline along the
-street centrelines from the start to the goal.
+(``scipy.sparse.csgraph.shortest_path``), giving a polyline along the street centrelines.
+
+Two kinds of plan:
+
+- :meth:`StreetPlanner.plan` — the shortest street path, U-turns allowed (what a pedestrian
+  would walk; used to score path lengths);
+- :meth:`StreetPlanner.drive` — how a car drives it: after at most one turn on the spot at
+  the start, it never U-turns on a street and takes every corner on a quarter circle of
+  ``turn_radius``. These are the lanes the
+  localizer is trained on (``envs.lanes``), so a robot driving this plan stays where its
+  pose belief is reliable.
 """
 
 from __future__ import annotations
@@ -17,7 +26,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import shortest_path
 
-__all__ = ["PlannedPath", "StreetPlanner", "path_length", "project_to_segments"]
+__all__ = ["PlannedPath", "StreetPlanner", "path_length", "project_to_segments",
+           "round_corners"]
 
 Array = NDArray[np.float64]
 
@@ -44,13 +54,48 @@ def path_length(path: ArrayLike) -> float:
     return float(np.sum(np.hypot(*np.diff(path, axis=0).T))) if len(path) > 1 else 0.0
 
 
+def round_corners(path: ArrayLike, radius: float, step: float = 0.05) -> Array:
+    """Replace each corner of a polyline by a circular arc tangent to both legs.
+
+    The arc radius is ``radius``, or less where a leg is too short to hold the tangent
+    points (at most half of each leg is used). Arcs are sampled every ``step`` metres.
+    """
+    path = _dedupe(np.asarray(path, dtype=np.float64))
+    if len(path) < 3 or radius <= 0:
+        return path
+    out = [path[0]]
+    for i in range(1, len(path) - 1):
+        a, b, c = path[i - 1], path[i], path[i + 1]
+        u, v = b - a, c - b
+        lu, lv = np.hypot(*u), np.hypot(*v)
+        u, v = u / lu, v / lv
+        turn = np.arctan2(u[0] * v[1] - u[1] * v[0], u @ v)  # signed, in (-pi, pi]
+        if abs(turn) < 1e-6 or abs(turn) > np.pi - 1e-6:
+            out.append(b)  # straight on, or a reversal: keep the corner
+            continue
+        tangent = min(radius * np.tan(abs(turn) / 2), 0.5 * lu, 0.5 * lv)
+        r = tangent / np.tan(abs(turn) / 2)
+        p0 = b - tangent * u
+        centre = p0 + np.sign(turn) * r * np.array([-u[1], u[0]])
+        phi0 = np.arctan2(*(p0 - centre)[::-1])
+        n = max(int(np.ceil(r * abs(turn) / step)), 1)
+        phis = phi0 + turn * np.linspace(0.0, 1.0, n + 1)
+        out += list(centre + r * np.column_stack([np.cos(phis), np.sin(phis)]))
+    out.append(path[-1])
+    return _dedupe(np.array(out))
+
+
 class StreetPlanner:
-    """Plan shortest street paths in a city.
+    """Plan street paths in a city.
 
     Parameters
     ----------
     city : envs.scene.City
         The known map: ``street_graph()`` gives the intersections and the street segments.
+    turn_radius : float
+        Radius (m) of the corners of :meth:`drive` plans.
+    u_turn_cost : float
+        Metres of driving a turn on the spot at the start of a :meth:`drive` plan is worth.
 
     Attributes
     ----------
@@ -58,14 +103,32 @@ class StreetPlanner:
     edges : ndarray (e, 2) int — street segments as node pairs.
     """
 
-    def __init__(self, city: Any) -> None:
+    def __init__(self, city: Any, turn_radius: float = 0.8, u_turn_cost: float = 4.0) -> None:
         nodes, edges = city.street_graph()
         self.city = city
+        self.turn_radius = float(turn_radius)
+        self.u_turn_cost = float(u_turn_cost)
         self.nodes = np.asarray(nodes, dtype=np.float64)
         self.edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
         if len(self.edges) == 0:
             raise ValueError("the city's street graph has no edges")
         self._a, self._b = self.nodes[self.edges[:, 0]], self.nodes[self.edges[:, 1]]
+        self._length = np.hypot(*(self._b - self._a).T)
+        # directed edges: 2e is a -> b, 2e + 1 is b -> a
+        self._tail = self.edges.ravel()                      # [a0, b0, a1, b1, ...]
+        self._head = self.edges[:, ::-1].ravel()             # [b0, a0, b1, a1, ...]
+        self._turns = self._directed_transitions()
+
+    def _directed_transitions(self) -> coo_matrix:
+        """Directed edge (x -> n) to (n -> w), w != x, weighted by the length of (n -> w)."""
+        rows, cols, w = [], [], []
+        for i, (x, n) in enumerate(zip(self._tail, self._head)):
+            for j in np.flatnonzero(self._tail == n):
+                if self._head[j] != x:
+                    rows.append(i)
+                    cols.append(int(j))
+                    w.append(self._length[j // 2])
+        return coo_matrix((w, (rows, cols)), shape=(2 * len(self.edges),) * 2)
 
     def nearest_street_point(self, p: ArrayLike) -> tuple[int, float, Array]:
         """The street segment nearest to ``p`` (2,): (edge index, t in [0, 1], foot point (2,))."""
@@ -74,6 +137,7 @@ class StreetPlanner:
         e = int(np.argmin(dist))
         return e, float(t[e]), foot[e]
 
+    # ------------------------------------------------------------------ shortest path
     def plan(self, start: ArrayLike, goal: ArrayLike) -> Array:
         """Shortest path from ``start`` to ``goal`` along the streets, (p, 2) waypoints.
 
@@ -82,23 +146,16 @@ class StreetPlanner:
         removed). Start and goal on the same street segment give the direct path along it.
         """
         start, goal = self._check_point(start, "start"), self._check_point(goal, "goal")
-        es, ts, fs = self.nearest_street_point(start)
-        eg, tg, fg = self.nearest_street_point(goal)
-        if es == eg:
-            middle = [fs, fg]
-        else:
-            middle = [fs, *self._via(es, ts, fs, eg, tg, fg), fg]
+        es, _, fs = self.nearest_street_point(start)
+        eg, _, fg = self.nearest_street_point(goal)
+        middle = [fs, fg] if es == eg else [fs, *self._via(es, fs, eg, fg), fg]
         return _dedupe(np.array([start, *middle, goal]))
 
-    def _via(self, es: int, ts: float, fs: Array, eg: int, tg: float, fg: Array) -> list[Array]:
+    def _via(self, es: int, fs: Array, eg: int, fg: Array) -> list[Array]:
         """Intersections on the shortest path between two points on different segments."""
         k = len(self.nodes)
         s, g = k, k + 1  # the two feet as extra graph nodes
-        rows, cols, w = [], [], []
-        for i, j in self.edges:
-            rows.append(i)
-            cols.append(j)
-            w.append(float(np.hypot(*(self.nodes[i] - self.nodes[j]))))
+        rows, cols, w = list(self.edges[:, 0]), list(self.edges[:, 1]), list(self._length)
         for extra, e, foot in ((s, es, fs), (g, eg, fg)):
             for node in self.edges[e]:
                 rows.append(extra)
@@ -113,6 +170,57 @@ class StreetPlanner:
             chain.append(node)
             node = pred[node]
         return [self.nodes[n] for n in reversed(chain)]
+
+    # ------------------------------------------------------------------ car-like path
+    def drive(self, pose: ArrayLike, goal: ArrayLike) -> Array:
+        """How a car drives from ``pose`` [x, y, yaw] to ``goal``: (p, 2) waypoints.
+
+        It joins the nearest street and drives along it, takes the shortest sequence of
+        streets that needs no U-turn, and rounds every corner with a quarter circle of
+        ``turn_radius`` (sampled every 5 cm). It sets off in the direction of its heading, or
+        turns round on the spot first when that saves more than ``u_turn_cost`` metres.
+        """
+        pose = np.asarray(pose, dtype=np.float64).reshape(-1)
+        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+            raise ValueError(f"pose must be a finite [x, y, yaw], got {pose}")
+        goal = self._check_point(goal, "goal")
+        es, _, fs = self.nearest_street_point(pose[:2])
+        eg, _, fg = self.nearest_street_point(goal)
+        forward = self._b[es] - self._a[es]
+        behind = int(np.cos(pose[2]) * forward[0] + np.sin(pose[2]) * forward[1] < 0)
+        best, best_cost = None, np.inf
+        for d, penalty in ((2 * es + behind, 0.0), (2 * es + 1 - behind, self.u_turn_cost)):
+            ahead = self.nodes[self._head[d]]
+            if eg == es and (ahead - fs) @ (fg - fs) >= 0 \
+                    and np.hypot(*(fg - fs)) <= np.hypot(*(ahead - fs)):
+                corners = [fs, fg]  # the goal is on this street, ahead: straight there
+            else:
+                corners = [fs, *self._directed_via(d, eg, fg), fg]
+            cost = path_length(corners) + penalty
+            if cost < best_cost:
+                best, best_cost = corners, cost
+        return round_corners(np.array([pose[:2], *best, goal]), self.turn_radius)
+
+    def _directed_via(self, d: int, eg: int, fg: Array) -> list[Array]:
+        """Intersections of the shortest U-turn-free route from directed edge ``d`` to the goal."""
+        m = 2 * len(self.edges)
+        goal = m  # a virtual node: entering the goal's street at one end, stopping at fg
+        g = self._turns.tocoo()
+        rows, cols, w = list(g.row), list(g.col), list(g.data)
+        for end, other in (tuple(self.edges[eg]), tuple(self.edges[eg][::-1])):
+            for i in np.flatnonzero((self._head == end) & (self._tail != other)):
+                rows.append(int(i))
+                cols.append(goal)
+                w.append(max(float(np.hypot(*(self.nodes[end] - fg))), 1e-9))
+        graph = coo_matrix((w, (rows, cols)), shape=(m + 1, m + 1)).tocsr()
+        dist, pred = shortest_path(graph, directed=True, indices=d, return_predecessors=True)
+        if not np.isfinite(dist[goal]):
+            raise ValueError("the goal is not reachable from the start without a U-turn")
+        chain, node = [], pred[goal]
+        while node != -9999 and node != d:
+            chain.append(self._head[node])
+            node = pred[node]
+        return [self.nodes[self._head[d]]] + [self.nodes[n] for n in reversed(chain)]
 
     @staticmethod
     def _check_point(p: ArrayLike, name: str) -> Array:
@@ -132,7 +240,7 @@ class PlannedPath:
 
     Parameters
     ----------
-    waypoints : (p, 2) from the start to the goal (e.g. :meth:`StreetPlanner.plan`).
+    waypoints : (p, 2) from the start to the goal (e.g. :meth:`StreetPlanner.drive`).
     step : float — resampling step (m).
     search : float — how far ahead (m) of the current progress the robot is looked for
         (progress never goes back, so a path passing near itself is followed in order).
@@ -146,7 +254,7 @@ class PlannedPath:
         for a, b in pairwise(w):
             n = max(int(np.ceil(np.hypot(*(b - a)) / step)), 1)
             pts += list(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
-        self.points = np.array(pts)
+        self.points = _dedupe(np.array(pts))
         self.step = float(step)
         self.search = max(int(search / step), 1)
         self.index = 0
@@ -158,7 +266,7 @@ class PlannedPath:
         return self.index
 
     def ahead(self, distance: float) -> Array:
-        """The path point ``distance`` metres beyond the current progress (the goal at most)."""
+        """The path point about ``distance`` metres beyond the current progress (at most the goal)."""
         i = min(self.index + round(distance / self.step), len(self.points) - 1)
         return self.points[i]
 
@@ -168,4 +276,4 @@ class PlannedPath:
 
     def remaining(self) -> float:
         """Path length (m) from the current progress to the goal."""
-        return (len(self.points) - 1 - self.index) * self.step
+        return path_length(self.points[self.index:])

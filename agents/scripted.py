@@ -77,8 +77,10 @@ def pure_pursuit(pose: Array, carrot: Array, remaining: float, speed: float, w_m
 class Navigator:
     """The plan to the current goal and the progress along it, from belief means.
 
-    A new goal starts a new plan; the plan is also redone from the belief mean when the mean is
-    farther than ``replan_distance`` from it (after a belief correction, say).
+    Plans are car-like (:meth:`agents.planner.StreetPlanner.drive`: lanes and rounded corners,
+    no U-turns), the kind of driving the localizer was trained on. A new goal starts a new
+    plan; the plan is also redone from the belief mean when the mean is farther than
+    ``replan_distance`` from it (after a belief correction, say).
 
     Parameters
     ----------
@@ -97,14 +99,15 @@ class Navigator:
         self.path: PlannedPath | None = None
         self.replans = 0
 
-    def update(self, xy: Array, goal: Array) -> PlannedPath:
-        """Plan (or replan) as needed for the believed position ``xy`` and advance the progress."""
+    def update(self, pose: Array, goal: Array) -> PlannedPath:
+        """Plan (or replan) as needed for the believed pose [x, y, yaw] and advance the
+        progress along the plan."""
         new_goal = self.goal is None or not np.allclose(goal, self.goal)
-        if new_goal or self.path.distance_to(xy) > self.replan_distance:
+        if new_goal or self.path.distance_to(pose[:2]) > self.replan_distance:
             self.replans += not new_goal
             self.goal = np.array(goal, dtype=np.float64)
-            self.path = PlannedPath(self.planner.plan(xy, goal))
-        self.path.update(xy)
+            self.path = PlannedPath(self.planner.drive(pose, goal))
+        self.path.update(pose[:2])
         return self.path
 
 
@@ -147,7 +150,7 @@ class ScriptedAgent:
     def act(self, obs: Mapping[str, Any]) -> NDArray[np.float32]:
         """The action U = [v, w] for one belief observation."""
         mean, _, goal = check_belief_observation(obs)
-        path = self.navigator.update(mean[:2], goal)
+        path = self.navigator.update(mean, goal)
         u = pure_pursuit(mean, path.ahead(self.lookahead), path.remaining(), self.speed,
                          self.w_max, self.turn_in_place)
         return u.astype(np.float32)

@@ -91,3 +91,47 @@ def test_planned_path_progress():
     assert path.remaining() == pytest.approx(3.0)
     with pytest.raises(ValueError, match="shape"):
         PlannedPath(np.zeros((3, 3)))
+
+
+def _headings(path):
+    d = np.diff(path, axis=0)
+    return np.arctan2(d[:, 1], d[:, 0])
+
+
+def test_drive_is_smooth_and_stays_on_the_streets(city):
+    planner = StreetPlanner(city, turn_radius=0.8)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        start = city.random_street_point(rng)
+        pose = np.array([*start, rng.uniform(-np.pi, np.pi)])
+        goal = city.random_street_point(rng)
+        path = planner.drive(pose, goal)
+        np.testing.assert_allclose(path[0], pose[:2])
+        np.testing.assert_allclose(path[-1], goal)
+        fine = PlannedPath(path, step=0.05).points
+        assert city.free_mask(fine, 0.3).all()
+        # after the start the heading never reverses: corners are arcs, no U-turn on a street
+        turns = np.abs(np.angle(np.exp(1j * np.diff(_headings(fine[2:])))))
+        assert turns.max() < np.pi / 2
+        # and away from the start, a corner is a quarter circle of the full radius
+        late = fine[len(fine) // 2:]
+        assert np.abs(np.angle(np.exp(1j * np.diff(_headings(late))))).max() < 0.2  # a sharp corner: pi/2
+
+
+def test_drive_sets_off_along_its_heading_unless_turning_round_saves_a_lot(city):
+    planner = StreetPlanner(city, u_turn_cost=4.0)
+    c = city.street_centers
+    y = c[1]
+    # on a street, facing +x; the goal 3 m behind: turning round (3 m + 4) beats a block loop
+    pose = np.array([c[1] + 2.0, y, 0.0])
+    back = planner.drive(pose, [c[1] + -1.0 + 0.5, y])
+    assert path_length(back) == pytest.approx(2.5)
+    # the goal ahead on the same street: straight there
+    ahead = planner.drive(pose, [c[1] + 3.5, y])
+    assert path_length(ahead) == pytest.approx(1.5)
+    assert np.all(np.diff(ahead[:, 0]) > 0)
+    # with turning round made expensive, it drives round the block instead
+    looping = StreetPlanner(city, u_turn_cost=100.0).drive(pose, [c[1] + -1.0 + 0.5, y])
+    assert path_length(looping) > 10.0
+    with pytest.raises(ValueError, match="pose"):
+        planner.drive([0.0, 0.0], [1.0, 1.0])
