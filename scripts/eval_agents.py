@@ -81,8 +81,9 @@ def parse_args(argv: list[str] | None = None) -> Args:
 
 def table(rows: list[dict]) -> str:
     """The markdown table of the summaries."""
-    lines = ["| agent | pose source | episodes | success rate | path ratio | collision episodes "
-             "| time to goal (s) | belief RMSE (m) |", "|---|---|---:|---:|---:|---:|---:|---:|"]
+    header = ("| agent | pose source | episodes | success rate | path ratio | collision episodes "
+              "| time to goal (s) | belief RMSE (m) |")
+    lines = [header, "|---|---|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['agent']} | {r['source']} | {r['episodes']} | {r['success_rate']:.2f} "
                      f"| {r['path_ratio']:.2f} | {r['collision_episodes']:.2f} "

@@ -150,8 +150,8 @@ def main(argv: list[str] | None = None) -> dict:
     t0 = time.perf_counter()
     model.learn(args.total_timesteps, callback=callbacks)
     seconds = time.perf_counter() - t0
-    policy = save_policy(model, out / "policy", **{"pose_source": args.pose_source,
-                                                    "scene_seed": args.scene_seed})
+    policy = save_policy(model, out / "policy", pose_source=args.pose_source,
+                         scene_seed=args.scene_seed)
     successes = getattr(evaluation, "evaluations_successes", [])
     summary = {
         "args": dataclasses.asdict(args), "train_seconds": round(seconds, 1),
