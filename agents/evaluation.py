@@ -31,7 +31,8 @@ class Episode:
     steps : int — env steps taken.
     time : float — seconds of simulated time (steps x dt).
     path_length : float — distance (m) the robot actually travelled.
-    shortest : float — length (m) of the shortest street path from the start to the goal.
+    shortest : float — length (m) of the shortest street path from the start to the goal, less
+        the goal radius (the episode ends that close to the goal).
     collision_steps : int — steps in which the robot touched a building or the boundary.
     final_distance : float — distance (m) to the goal at the end.
     belief_rmse : float — RMS distance (m) between the belief mean and the true position.
@@ -62,7 +63,7 @@ def run_episode(env: gym.Env, agent: Any, seed: int, planner: StreetPlanner | No
     obs, info = env.reset(seed=seed, options=options)
     agent.reset()
     start = info["pose"].copy()
-    shortest = path_length(planner.plan(start[:2], base.goal))
+    shortest = max(path_length(planner.plan(start[:2], base.goal)) - base.GOAL_RADIUS, 0.0)
     travelled, collisions, sq_err, steps = 0.0, 0, [], 0
     terminated = truncated = False
     prev = start[:2]

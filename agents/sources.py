@@ -8,6 +8,10 @@
   alone from the true start pose,
 
 all with the same observation ``Dict(pose_mean=(3,), pose_cov=(6,), goal=(2,))``.
+
+Episodes start on a street lane by default (:class:`LaneStart`: like a parked car, on a street
+and facing along it), which is where the localizer is trained (``envs.lanes``);
+``start="random"`` keeps the env's own start (any free pose, any heading).
 """
 
 from __future__ import annotations
@@ -15,19 +19,54 @@ from __future__ import annotations
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
 import envs  # noqa: F401  (registers AppearanceNav-v0)
+from envs.lanes import lane_poses
 from localization.wrappers import BeliefWrapper, DeadReckoningWrapper, OracleWrapper
 
-__all__ = ["POSE_SOURCES", "make_pose_env"]
+__all__ = ["POSE_SOURCES", "STARTS", "LaneStart", "make_pose_env"]
 
 POSE_SOURCES = ("oracle", "belief", "dead_reckoning")
+STARTS = ("lane", "random")
+
+
+class LaneStart(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Start every episode on a street lane: a pose from ``envs.lanes.lane_poses`` (any street,
+    either direction, or a turn), unless ``options["pose"]`` is given.
+
+    The start pose is drawn from ``default_rng(seed)`` at a seeded reset, else from a generator
+    seeded at the last seeded reset, so seeds give the same episodes.
+
+    Parameters
+    ----------
+    env : an AppearanceNav env.
+    lateral, heading : float — largest offsets from the lane (m, rad).
+    """
+
+    def __init__(self, env: gym.Env, lateral: float = 0.2, heading: float = 0.1) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self, lateral=lateral, heading=heading)
+        gym.Wrapper.__init__(self, env)
+        self.lateral, self.heading = lateral, heading
+        self._rng = np.random.default_rng()
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None,
+              ) -> tuple[Any, dict[str, Any]]:
+        if seed is not None:
+            self._rng = np.random.default_rng(seed)
+        options = dict(options or {})
+        if options.get("pose") is None:
+            poses, _ = lane_poses(self.env.unwrapped.city, 1, self._rng, "streets",
+                                  lateral=self.lateral, heading=self.heading)
+            options["pose"] = poses[0]
+        return self.env.reset(seed=seed, options=options)
 
 
 def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None = None,
                   scene_seed: int = 0, camera: str = "perspective",
-                  image_size: tuple[int, int] = (64, 64), motion_noise: float = 0.05,
-                  max_episode_steps: int = 400, **belief_kwargs: Any) -> gym.Env:
+                  image_size: tuple[int, int] = (64, 64), motion_noise: float = 0.1,
+                  max_episode_steps: int = 400, start: str = "lane",
+                  **belief_kwargs: Any) -> gym.Env:
     """``AppearanceNav-v0`` with the named pose source (see the module docstring).
 
     Parameters
@@ -39,7 +78,10 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
     measurement : str, optional
         The belief's measurement model (default: BeliefWrapper's).
     scene_seed, camera, image_size, motion_noise, max_episode_steps
-        Passed to ``gymnasium.make("AppearanceNav-v0", ...)``.
+        Passed to ``gymnasium.make("AppearanceNav-v0", ...)``; the localizer's noise model
+        holds for the motion noise it was fitted with (0.1 in ``make demo``).
+    start : {"lane", "random"}
+        Start episodes on a street lane (:class:`LaneStart`) or anywhere free (the env's own).
     **belief_kwargs
         More BeliefWrapper settings (``gate_probability``, ``relocalize_after``, ...).
     """
@@ -47,9 +89,13 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
         raise ValueError(f"unknown pose source {source!r}; choose one of {POSE_SOURCES}")
     if source != "oracle" and localizer is None:
         raise ValueError(f"pose source {source!r} needs a fitted localizer")
+    if start not in STARTS:
+        raise ValueError(f"unknown start {start!r}; choose one of {STARTS}")
     env = gym.make("AppearanceNav-v0", scene_seed=scene_seed, camera=camera,
                    image_size=tuple(image_size), motion_noise=motion_noise,
                    max_episode_steps=max_episode_steps)
+    if start == "lane":
+        env = LaneStart(env)
     if source == "oracle":
         return OracleWrapper(env)
     if source == "dead_reckoning":

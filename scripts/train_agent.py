@@ -57,7 +57,10 @@ class Args:
     scene_seed: int = field(default=0, metadata={"help": "the city"})
     camera: str = field(default="perspective", metadata={"help": "env camera"})
     image_size: int = field(default=64, metadata={"help": "side of the square camera image"})
-    motion_noise: float = field(default=0.05, metadata={"help": "actuation noise of the env"})
+    motion_noise: float = field(default=0.1, metadata={
+        "help": "actuation noise of the env (the localizer's noise model is fitted at one level)"})
+    start: str = field(default="lane", metadata={
+        "help": "episode starts: 'lane' (on a street, facing along it) or 'random' (any free pose)"})
     max_episode_steps: int = field(default=400, metadata={"help": "episode truncation"})
     total_timesteps: int = field(default=300_000, metadata={"help": "PPO environment steps"})
     n_envs: int = field(default=8, metadata={"help": "environments per rollout (in-process)"})
@@ -123,7 +126,7 @@ def make_vec_env(args: Args, localizer: AppearanceLocalizer | None, n: int, seed
                             scene_seed=args.scene_seed, camera=args.camera,
                             image_size=(args.image_size, args.image_size),
                             motion_noise=args.motion_noise,
-                            max_episode_steps=args.max_episode_steps)
+                            max_episode_steps=args.max_episode_steps, start=args.start)
         return Monitor(NavigationObservation(StreetProgressReward(env)))
     venv = DummyVecEnv([make] * n)
     venv.seed(seed)

@@ -102,3 +102,21 @@ def test_pose_sources_share_one_observation_space():
     with pytest.raises(ValueError, match="needs a fitted localizer"):
         make_pose_env("belief")
     env.close()
+
+
+def test_lane_starts_are_on_streets_and_seeded():
+    env = make_pose_env("oracle", scene_seed=0)
+    city = env.unwrapped.city
+    c = city.street_centers
+    starts = []
+    for seed in (5, 6, 5):
+        _, info = env.reset(seed=seed)
+        starts.append(info["pose"])
+        x, y, _ = info["pose"]
+        off = min(np.min(np.abs(x - c)), np.min(np.abs(y - c)))
+        assert off < 0.9  # on a lane (0.2 m lateral, or on a 0.8 m turn arc)
+    np.testing.assert_allclose(starts[0], starts[2], atol=1e-3)
+    assert np.hypot(*(starts[0][:2] - starts[1][:2])) > 1e-3
+    with pytest.raises(ValueError, match="unknown start"):
+        make_pose_env("oracle", start="anywhere")
+    env.close()
