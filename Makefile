@@ -36,6 +36,8 @@ bench: setup
 	$(RUN) scripts/bench_env.py --cameras
 	$(RUN) scripts/bench_gse.py
 	$(RUN) scripts/bench_filter.py
+	@test -f results/localizer.npz || $(RUN) scripts/demo.py
+	$(RUN) scripts/bench_agents.py
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

@@ -1,0 +1,107 @@
+"""Benchmark: PPO on the GSE belief against PPO on the true pose, same training budget.
+
+CleanRL style: one file, every setting a field of ``Args`` (``--help`` lists them).
+
+    python scripts/bench_agents.py                       # needs results/localizer.npz (make demo)
+    python scripts/bench_agents.py --total-timesteps 50000 --episodes 20   # a shorter run
+
+1. ``scripts/train_agent.py`` trains PPO on the oracle (true pose) and on the belief with the
+   same number of environment steps (and seeds), each in this process, one after the other;
+2. ``scripts/eval_agents.py`` evaluates the scripted agent on all three pose sources (oracle,
+   belief, dead reckoning) and each PPO policy on the source it was trained on, over the same
+   ``episodes`` held-out resets.
+
+Writes ``<out>/bench_agents.json`` and ``<out>/bench_agents.md``. Targets (PASS/MISS): PPO on the
+belief reaches >= 0.9x the success rate of PPO on the true pose; each training run <= 30 min.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import platform
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+for p in (ROOT, ROOT / "scripts"):
+    if str(p) not in sys.path:
+        sys.path.insert(0, str(p))
+
+import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
+
+# isort: split
+import eval_agents
+import train_agent
+
+TARGET_RATIO = 0.9
+TARGET_TRAIN_MINUTES = 30.0
+
+
+@dataclass
+class Args:
+    localizer: str = field(default="results/localizer.npz", metadata={
+        "help": "fitted AppearanceLocalizer of the city (make demo writes it)"})
+    total_timesteps: int = field(default=300_000, metadata={"help": "PPO steps per pose source"})
+    n_envs: int = field(default=8, metadata={"help": "environments per rollout"})
+    seed: int = field(default=0, metadata={"help": "training seed (the same for both sources)"})
+    episodes: int = field(default=100, metadata={"help": "evaluation episodes per agent and source"})
+    scene_seed: int = field(default=0, metadata={"help": "the city"})
+    motion_noise: float = field(default=0.1, metadata={"help": "actuation noise of the env"})
+    out: str = field(default="results", metadata={"help": "where bench_agents.* and agents/ go"})
+
+
+def parse_args(argv: list[str] | None = None) -> Args:
+    """Parse ``--field-name value`` options built from the fields of ``Args``."""
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    for f in dataclasses.fields(Args):
+        parser.add_argument("--" + f.name.replace("_", "-"), type=type(f.default),
+                            default=f.default, help=f"{f.metadata['help']} (default: {f.default!r})")
+    return Args(**vars(parser.parse_args(argv)))
+
+
+def main(argv: list[str] | None = None) -> dict:
+    args = parse_args(argv)
+    out = Path(args.out)
+    common = ["--localizer", args.localizer, "--scene-seed", str(args.scene_seed),
+              "--motion-noise", str(args.motion_noise)]
+    training = {}
+    for source in ("oracle", "belief"):
+        training[source] = train_agent.main([
+            "--pose-source", source, "--total-timesteps", str(args.total_timesteps),
+            "--n-envs", str(args.n_envs), "--seed", str(args.seed),
+            "--out", str(out / "agents"), *common])
+    t0 = time.perf_counter()
+    rows = eval_agents.main(["--episodes", str(args.episodes), "--policies", str(out / "agents"),
+                             "--out", str(out), *common])
+    success = {(r["agent"], r["source"]): r["success_rate"] for r in rows}
+    ratio = success[("ppo", "belief")] / max(success[("ppo", "oracle")], 1e-9)
+    minutes = {s: training[s]["train_seconds"] / 60 for s in training}
+    targets = [
+        ("PPO success, belief / oracle", round(ratio, 3), f">= {TARGET_RATIO}",
+         ratio >= TARGET_RATIO),
+        *((f"PPO training time on {s} (min)", round(m, 1), f"<= {TARGET_TRAIN_MINUTES:.0f}",
+           m <= TARGET_TRAIN_MINUTES) for s, m in minutes.items()),
+    ]
+    result = {"args": dataclasses.asdict(args), "machine": platform.platform(),
+              "training": training, "evaluation": rows,
+              "evaluation_seconds": round(time.perf_counter() - t0, 1),
+              "targets": [{"target": t, "value": v, "limit": lim, "pass": ok}
+                          for t, v, lim, ok in targets]}
+    md = (out / "agents.md").read_text() + (
+        f"\nPPO: {args.total_timesteps} steps per pose source (seed {args.seed}).\n\n"
+        "| target | value | limit | status |\n|---|---:|---|---|\n"
+        + "\n".join(f"| {t} | {v} | {lim} | {'PASS' if ok else 'MISS'} |"
+                    for t, v, lim, ok in targets) + "\n")
+    (out / "bench_agents.md").write_text(md)
+    (out / "bench_agents.json").write_text(json.dumps(result, indent=2))
+    print(md)
+    return result
+
+
+if __name__ == "__main__":
+    main()
