@@ -29,6 +29,7 @@ def save_regressor(model: Any, path: str | Path) -> None:
         settings["params"]["theta_scale"] = settings["params"]["theta_scale"].tolist()
     arrays = {k: getattr(model, k) if hasattr(model, k) else getattr(g, k) for k in _ARRAYS}
     arrays["cut_"] = np.zeros(0) if g.cut_ is None else g.cut_
+    arrays["loop_angle_"] = np.zeros(0) if model.loop_angle_ is None else model.loop_angle_
     np.savez(path, settings=np.array(json.dumps(settings)), **arrays)
 
 
@@ -47,7 +48,11 @@ def load_regressor(cls: Any, path: str | Path) -> Any:
         for k in _ARRAYS:
             setattr(model if k.endswith(("mean_", "center_", "scale_")) or k in
                     ("theta_", "Gr_", "GR_") else g, k, np.asarray(data[k], dtype=np.float64))
-        g.cut_ = data["cut_"] if data["cut_"].size else None
+        cut = data["cut_"]
+        g.cut_ = (cut[:, None] if cut.ndim == 1 else cut) if cut.size else None
+        model.cut_ = g.cut_
+        la = data.get("loop_angle_")
+        model.loop_angle_ = la if la is not None and la.size else None
         g.bandwidth_, g.n_edges_ = float(s["gse_bandwidth_"]), int(s["n_edges_"])
         g.recovery_bandwidth_ = float(s["recovery_bandwidth_"])
         g.n_components_graph_ = 1
@@ -63,7 +68,7 @@ def load_regressor(cls: Any, path: str | Path) -> Any:
                      and g.embedding_.shape == (n, q) and model.theta_.shape == (n, d)
                      and model.Gr_.shape == (n, q, m) and model.GR_.shape == (n, q, d)
                      and p_ == m + d + len(model._per)
-                     and (g.cut_ is None or g.cut_.shape == (n,)))
+                     and (g.cut_ is None or g.cut_.shape[0] == n))
         if not shapes_ok:
             raise ValueError("inconsistent array shapes")
         if not all(np.isfinite(getattr(model if hasattr(model, k) else g, k)).all()

@@ -234,9 +234,10 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
             ) -> GrassmannStiefelEigenmaps:
         """Learn the tangent bundle of the sample ``Z`` (n, p).
 
-        ``cut`` (n,), optional: a periodic coordinate in radians; graph links whose
-        unwrapped difference exceeds pi are removed, so a closed loop is cut open
-        at +-pi and embedded as one chart (spec section 9).
+        ``cut`` (n,) or (n, c), optional: periodic coordinates in radians (e.g. a
+        heading, or the angle along a closed route); graph links whose unwrapped
+        difference in any of them exceeds pi are removed, so each closed loop is cut
+        open at +-pi and the sample is embedded as one chart (spec section 9).
         """
         Z = check_2d(Z, "Z")
         n, p = Z.shape
@@ -248,12 +249,16 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
         if not sigma > 0:
             raise ValueError(f"bandwidth must be positive, got {sigma}")
         Q = local_pca(Z, Z, ind, np.exp(-0.5 * (dist / sigma) ** 2), q)
-        self.cut_ = None if cut is None else np.asarray(cut, dtype=np.float64).ravel()
-        if self.cut_ is not None and (self.cut_.shape != (n,) or not np.isfinite(self.cut_).all()):
-            raise ValueError(f"cut must be {n} finite angles (one per sample), got shape "
-                             f"{np.shape(cut)}")
+        self.cut_ = None
+        if cut is not None:
+            c = np.asarray(cut, dtype=np.float64)
+            c = c[:, None] if c.ndim == 1 else c
+            if c.ndim != 2 or c.shape[0] != n or not np.isfinite(c).all():
+                raise ValueError(f"cut must be {n} finite angles per cut (shape ({n},) or "
+                                 f"({n}, c)), got shape {np.shape(cut)}")
+            self.cut_ = c
         allowed = None if cut is None else same_side(
-            np.column_stack([self.cut_, self.cut_[ind]]))[:, 1:]
+            np.concatenate([self.cut_[:, None, :], self.cut_[ind]], axis=1))[:, 1:]
         ei, ej = symmetric_edges(ind, allowed)
         d2 = np.concatenate([((Z[ei[s:s + 50000]] - Z[ej[s:s + 50000]]) ** 2).sum(axis=1)
                              for s in range(0, len(ei), 50000)])
@@ -333,7 +338,20 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
     def _recover(self, Y: Array, cols: np.ndarray | slice = slice(None), jacobian: bool = False
                  ) -> tuple[Array, Array | None, Array]:
         """g(Y) restricted to ambient columns ``cols`` (JR in y with slopes H_j, bandwidth
-        ``recovery_bandwidth_``) and its exact Jacobian dg/dy."""
+        ``recovery_bandwidth_``) and its exact Jacobian dg/dy. Rows of ``Y`` with NaN
+        (out-of-domain representations) give NaN."""
+        fin = np.isfinite(Y).all(axis=1)
+        if not fin.all():
+            p = self.Z_[:, cols].shape[1]
+            g = np.full((len(Y), p), np.nan)
+            J = np.full((len(Y), p, Y.shape[1]), np.nan) if jacobian else None
+            bad = ~fin
+            if fin.any():
+                gf, Jf, bf = self._recover(Y[fin], cols, jacobian)
+                g[fin], bad[fin] = gf, bf
+                if J is not None:
+                    J[fin] = Jf
+            return g, J, bad
         k = self.n_neighbors
         d, ind = self._ytree.query(Y, k=k)
         d, ind = np.asarray(d).reshape(len(Y), k), np.asarray(ind).reshape(len(Y), k)

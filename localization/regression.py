@@ -7,8 +7,11 @@ composed with the recovery map: ``psi*(w) = g_v(r*(w))``, ``Phi*(theta) = g_u(R*
 A periodic pose column (yaw) enters Z as a (cos, sin) pair of radius
 ``theta_scale`` (so Z-space neighbourhoods see the true geometry), and the GSE
 graph is cut open at yaw = +-pi: a closed loop cannot be embedded by the
-least-squares step of spec 2.5 (spec section 9). Every kernel average keeps only
-the neighbours on the nearest neighbour's side of the cut.
+least-squares step of spec 2.5 (spec section 9). The same holds for a closed loop
+traced by the positions (a robot driving around a block, as in the paper's
+experiment): ``loop_cut="auto"`` detects it (:func:`~localization._graph.loop_coordinate`)
+and cuts it at one place. Every kernel average keeps only the neighbours on the
+nearest neighbour's side of every cut.
 """
 
 from __future__ import annotations
@@ -20,10 +23,13 @@ from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from ._graph import Array, brute_knn, check_2d, knn_graph, local_pca, same_side
+from ._graph import Array, brute_knn, check_2d, knn_graph, local_pca, loop_coordinate, same_side
 from ._io import load_regressor, save_regressor
 from .gse import GrassmannStiefelEigenmaps
 from .jacobian_regression import BANDWIDTH_GRID, gaussian_jr, loo_bandwidth
+from .model_selection import select_n_neighbors
+
+__all__ = ["GSERegressor", "pinv_blocks", "rrmse", "select_n_neighbors", "wrap_angle"]
 
 
 def wrap_angle(a: Array) -> Array:
@@ -83,6 +89,11 @@ class GSERegressor(BaseEstimator):
         Multiply K_W by the Binet-Cauchy factor between the local PCA tangent of the
         w-sample at the query and Span(G_u) at the sample (spec 3.2). The factor is not
         differentiated: embed_jacobian then ignores its (small) derivative.
+    loop_cut : {"auto", "none"}, default="auto"
+        "auto": if the linear (position) columns of Theta trace a closed loop, cut it
+        open at one place (angle in ``loop_angle_``), like the yaw cut. Needed when
+        ``n_components`` is smaller than the loop's embedding needs (a closed route
+        with n_components=1).
 
     Attributes
     ----------
@@ -93,6 +104,10 @@ class GSERegressor(BaseEstimator):
         LOO bandwidths of r* (standardised w units) and R* (scaled theta units).
     pose_condition_ : ndarray of shape (n,)
         cond(G_v) at the samples.
+    loop_angle_ : ndarray of shape (n,) or None
+        Angle along the detected position loop (None: no loop, or loop_cut="none").
+    cut_ : ndarray of shape (n, c) or None
+        All cut coordinates (periodic columns, then the loop angle).
     """
 
     def __init__(self, n_components: int | None = None, n_neighbors: int = 20,
@@ -102,7 +117,7 @@ class GSERegressor(BaseEstimator):
                  bandwidth_grid: tuple[float, ...] = BANDWIDTH_GRID,
                  out_of_domain: str = "raise", random_state: int = 0,
                  theta_scale_factor: float = 2.0, jr_neighbors: int | None = None,
-                 kernel_grassmann: bool = False) -> None:
+                 kernel_grassmann: bool = False, loop_cut: str = "auto") -> None:
         self.n_components = n_components
         self.n_neighbors = n_neighbors
         self.periodic = periodic
@@ -117,6 +132,7 @@ class GSERegressor(BaseEstimator):
         self.theta_scale_factor = theta_scale_factor
         self.jr_neighbors = jr_neighbors
         self.kernel_grassmann = kernel_grassmann
+        self.loop_cut = loop_cut
 
     # ----------------------------------------------------------------- geometry
     def _periodic(self, d: int) -> tuple[int, ...]:
@@ -171,17 +187,30 @@ class GSERegressor(BaseEstimator):
         return E
 
     def _auto_scale(self, Ws: Array, Theta: Array, ind_w: Array) -> Array:
-        """Per-column feature sensitivity |dw/dtheta_c| (median over samples) from local
+        """Feature sensitivity |dw/dtheta| per unit group (median over samples) from local
         least squares of standardised w on theta over *feature-space* neighbours
-        ``ind_w`` (pose-space neighbours would let poses bridge separate feature clusters)."""
+        ``ind_w`` (pose-space neighbours would let poses bridge separate feature clusters).
+
+        Groups: all linear columns together (one isotropic scale: x and y share metres),
+        each periodic column alone. The local fit is the minimum-norm least-squares
+        solution ignoring pose directions in which the neighbours spread less than 10 %
+        of the main one: on a 1-D route through a 2-D position space the lateral
+        direction is not observed, and fitting it would blow one column's scale up."""
         d = Theta.shape[1]
         self.theta_scale_ = np.ones(d)
         dT = self._pose_diff(Theta, Theta[ind_w])
         dW = Ws[:, None, :] - Ws[ind_w]
-        A = np.swapaxes(dT, 1, 2) @ dT
-        A += 1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] * np.eye(d)
-        Jt = np.linalg.solve(A, np.swapaxes(dT, 1, 2) @ dW)  # (n, d, m) = J^T
-        return np.median(np.linalg.norm(Jt, axis=2), axis=0)
+        lin = [c for c in range(d) if c not in self._per]
+        groups = ([lin] if lin else []) + [[c] for c in self._per]
+        rms = np.empty((len(Theta), d))  # per-sample RMS of each group, so rcond is unit-free
+        for g in groups:
+            r = np.sqrt((dT[..., g] ** 2).sum(axis=2).mean(axis=1))
+            rms[:, g] = np.maximum(r, np.finfo(float).tiny)[:, None]
+        Jt = np.linalg.pinv(dT / rms[:, None, :], rcond=0.1) @ dW / rms[:, :, None]  # (n, d, m)
+        scale = np.empty(d)
+        for g in groups:
+            scale[g] = np.median(np.linalg.norm(Jt[:, g, :], ord=2, axis=(1, 2)))
+        return scale
 
     # --------------------------------------------------------------------- fit
     def fit(self, W: Array, Theta: Array) -> GSERegressor:
@@ -216,11 +245,19 @@ class GSERegressor(BaseEstimator):
                              "theta_scale='auto' a zero means the features do not vary with "
                              "that Theta column (drop it or pass theta_scale explicitly)")
         self.theta_ = Theta
+        if self.loop_cut not in ("auto", "none"):
+            raise ValueError(f"loop_cut must be 'auto' or 'none', got {self.loop_cut!r}")
+        lin = [c for c in range(d) if c not in self._per]
+        self.loop_angle_ = (loop_coordinate(Theta[:, lin], k, seed=self.random_state)
+                            if self.loop_cut == "auto" and lin else None)
+        cuts = [Theta[:, c] for c in self._per] + (
+            [self.loop_angle_] if self.loop_angle_ is not None else [])
+        self.cut_ = np.column_stack(cuts) if cuts else None
         Z = np.column_stack([Ws, self._lift(Theta)])
         self.gse_ = GrassmannStiefelEigenmaps(
             q, n_neighbors=k, bandwidth=self.bandwidth, grassmann_kernel=self.grassmann_kernel,
             out_of_domain=self.out_of_domain, random_state=self.random_state)
-        self.gse_.fit(Z, cut=Theta[:, self._per[0]] if self._per else None)
+        self.gse_.fit(Z, cut=self.cut_)
         self.gse_.select_recovery_bandwidth()
         H = self.gse_.frames_
         self.Gr_ = pinv_blocks(H[:, :m, :])
@@ -241,7 +278,7 @@ class GSERegressor(BaseEstimator):
         if kj != k:
             d2, ind_w = brute_knn(Ws, self._ws_sqn, Ws, kj + 1)
             ind_w, dist_w = ind_w[:, 1:], np.sqrt(d2[:, 1:])
-        mask = same_side(self.theta_[ind_w][..., self._per[0]]) if self._per else None
+        mask = self._mask(ind_w)
         grid = np.asarray(self.bandwidth_grid)
         self._pca_bw = 0.5 * float(np.median(dist_w[:, -1]))
         self.bandwidth_w_, _ = loo_bandwidth(
@@ -250,7 +287,7 @@ class GSERegressor(BaseEstimator):
         _, ind_t = self._zv_tree.query(self._zv, k=kj + 1)
         ind_t = ind_t[:, 1:]
         dX = self._pose_diff(Theta, Theta[ind_t])
-        mask = same_side(self.theta_[ind_t][..., self._per[0]]) if self._per else None
+        mask = self._mask(ind_t)
         self.bandwidth_theta_, _ = loo_bandwidth(
             dX, y[ind_t], self.GR_[ind_t], y,
             grid * np.median(np.linalg.norm(dX[:, -1], axis=1)), mask)
@@ -282,6 +319,10 @@ class GSERegressor(BaseEstimator):
                 if o is not None:
                     o[bad] = np.nan
 
+    def _mask(self, ind: Array) -> Array | None:
+        """Neighbours (n, k) on the nearest neighbour's side of every cut, or None."""
+        return None if self.cut_ is None else same_side(self.cut_[ind])
+
     def _w_factor(self, Ws: Array, ind: Array) -> Array | None:
         """log Binet-Cauchy factor of K_W (n, k), or None when kernel_grassmann is off."""
         if not self.kernel_grassmann:
@@ -300,7 +341,7 @@ class GSERegressor(BaseEstimator):
             ind = np.asarray(self._ws_tree.query(Ws, k=self.jr_neighbors_)[1]).reshape(len(Ws), -1)
         else:
             ind = brute_knn(self._ws, self._ws_sqn, Ws, self.jr_neighbors_)[1]
-        mask = same_side(self.theta_[ind][..., self._per[0]]) if self._per else None
+        mask = self._mask(ind)
         r, J, log_sum = gaussian_jr(Ws[:, None, :] - self._ws[ind], self.embedding_[ind],
                                     self.Gr_[ind], self.bandwidth_w_, mask, jacobian,
                                     self._w_factor(Ws, ind))
@@ -315,7 +356,7 @@ class GSERegressor(BaseEstimator):
             Theta[:, c] = wrap_angle(Theta[:, c])
         _, ind = self._zv_tree.query(self._lift(Theta), k=self.jr_neighbors_)
         ind = np.asarray(ind).reshape(len(Theta), -1)
-        mask = same_side(self.theta_[ind][..., self._per[0]]) if self._per else None
+        mask = self._mask(ind)
         R, J, log_sum = gaussian_jr(self._pose_diff(Theta, self.theta_[ind]), self.embedding_[ind],
                                     self.GR_[ind], self.bandwidth_theta_, mask, jacobian)
         if J is not None:
@@ -368,28 +409,3 @@ class GSERegressor(BaseEstimator):
         """Load a model written by :meth:`save`; ValueError if corrupt or incomplete."""
         return load_regressor(cls, path)
 
-
-def select_n_neighbors(W: Array, Theta: Array, grid: tuple[int, ...] = (10, 15, 20, 30),
-                       cv: int = 3, random_state: int = 0, **params: object
-                       ) -> tuple[int, dict[int, float]]:
-    """Choose ``n_neighbors`` by K-fold cross-validation of psi* (pose RRMSE).
-
-    Returns the best k and the mean validation RRMSE for every k in ``grid``
-    (``inf`` where a fit failed, e.g. a disconnected graph for small k).
-    """
-    W, Theta = check_2d(W, "W"), check_2d(Theta, "Theta")
-    folds = np.array_split(np.random.default_rng(random_state).permutation(len(W)), cv)
-    periodic = tuple(params.get("periodic", ()))  # type: ignore[arg-type]
-    scores: dict[int, float] = {}
-    for k in grid:
-        errs = []
-        for f in folds:
-            tr = np.setdiff1d(np.arange(len(W)), f)
-            try:
-                model = GSERegressor(n_neighbors=k, **params).fit(W[tr], Theta[tr])  # type: ignore[arg-type]
-                pred = GSERegressor.predict(model, W[f])
-                errs.append(rrmse(pred, Theta[f], periodic))
-            except ValueError:
-                errs.append(np.inf)
-        scores[k] = float(np.mean(errs))
-    return min(scores, key=scores.get), scores  # type: ignore[arg-type]
