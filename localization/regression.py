@@ -26,7 +26,7 @@ from sklearn.utils.validation import check_is_fitted
 from ._graph import Array, brute_knn, check_2d, knn_graph, local_pca, loop_coordinate, same_side
 from ._io import load_regressor, save_regressor
 from .gse import GrassmannStiefelEigenmaps
-from .jacobian_regression import BANDWIDTH_GRID, gaussian_jr, loo_bandwidth
+from .jacobian_regression import AGREEMENT_GRID, BANDWIDTH_GRID, gaussian_jr, loo_bandwidth
 from .model_selection import select_n_neighbors
 
 __all__ = ["GSERegressor", "pinv_blocks", "rrmse", "select_n_neighbors", "wrap_angle"]
@@ -94,6 +94,19 @@ class GSERegressor(BaseEstimator):
         open at one place (angle in ``loop_angle_``), like the yaw cut. Needed when
         ``n_components`` is smaller than the loop's embedding needs (a closed route
         with n_components=1).
+    adaptive_bandwidth : bool, default=False
+        Sample-point adaptive kernels of r* and R*: training point j gets the bandwidth
+        ``bandwidth_w_ x w_radius_[j]`` (its distance to its jr_neighbors-th
+        feature-space neighbour; ``bandwidth_theta_ x theta_radius_[j]`` in pose
+        space), so sparsely sampled stretches (a robot turning: images change fast;
+        gaps along a route) keep kernel support. The bandwidths are then LOO factors.
+    agreement : None, "auto" or float, default=None
+        Robust r*: weight each neighbour also by the agreement of its first-order
+        prediction ``y_j + G_r (w - w_j)`` with the densest group of predictions
+        (:func:`~localization.jacobian_regression.agreement_factor`), with scale
+        ``tau = agreement x`` the median y-distance to the jr_neighbors-th neighbour.
+        Look-alike places among the feature-space neighbours then drop out. "auto":
+        choose the factor (or none) with the bandwidth by leave-one-out.
 
     Attributes
     ----------
@@ -101,7 +114,13 @@ class GSERegressor(BaseEstimator):
     embedding_ : ndarray of shape (n, q)
     theta_scale_ : ndarray of shape (d,)
     bandwidth_w_, bandwidth_theta_ : float
-        LOO bandwidths of r* (standardised w units) and R* (scaled theta units).
+        LOO bandwidths of r* (standardised w units, or a factor of ``w_radius_`` with
+        adaptive_bandwidth) and R* (scaled theta units).
+    agreement_ : float or None
+        tau of the agreement factor of r* (None: off).
+    w_radius_, theta_radius_ : ndarray of shape (n,)
+        Distance of each sample to its jr_neighbors-th neighbour in feature space
+        (standardised) and in pose space (scaled).
     pose_condition_ : ndarray of shape (n,)
         cond(G_v) at the samples.
     loop_angle_ : ndarray of shape (n,) or None
@@ -117,7 +136,8 @@ class GSERegressor(BaseEstimator):
                  bandwidth_grid: tuple[float, ...] = BANDWIDTH_GRID,
                  out_of_domain: str = "raise", random_state: int = 0,
                  theta_scale_factor: float = 2.0, jr_neighbors: int | None = None,
-                 kernel_grassmann: bool = False, loop_cut: str = "auto") -> None:
+                 kernel_grassmann: bool = False, loop_cut: str = "auto",
+                 adaptive_bandwidth: bool = False, agreement: float | str | None = None) -> None:
         self.n_components = n_components
         self.n_neighbors = n_neighbors
         self.periodic = periodic
@@ -133,6 +153,8 @@ class GSERegressor(BaseEstimator):
         self.jr_neighbors = jr_neighbors
         self.kernel_grassmann = kernel_grassmann
         self.loop_cut = loop_cut
+        self.adaptive_bandwidth = adaptive_bandwidth
+        self.agreement = agreement
 
     # ----------------------------------------------------------------- geometry
     def _periodic(self, d: int) -> tuple[int, ...]:
@@ -281,16 +303,30 @@ class GSERegressor(BaseEstimator):
         mask = self._mask(ind_w)
         grid = np.asarray(self.bandwidth_grid)
         self._pca_bw = 0.5 * float(np.median(dist_w[:, -1]))
-        self.bandwidth_w_, _ = loo_bandwidth(
-            Ws[:, None, :] - Ws[ind_w], y[ind_w], self.Gr_[ind_w], y,
-            grid * np.median(dist_w[:, -1]), mask, self._w_factor(Ws, ind_w))
+        self.w_radius_ = dist_w[:, -1].copy()
+        y_radius = float(np.median(cKDTree(y).query(y, k=kj + 1)[0][:, -1]))
+        taus = {"auto": (None, *AGREEMENT_GRID), None: (None,)}.get(self.agreement,  # type: ignore[call-overload]
+                                                                    (self.agreement,))
+        best = (np.inf, 0.0, None)
+        for a in taus:
+            tau = None if a is None else float(a) * y_radius
+            bw, mse = loo_bandwidth(
+                Ws[:, None, :] - Ws[ind_w], y[ind_w], self.Gr_[ind_w], y,
+                grid if self.adaptive_bandwidth else grid * np.median(dist_w[:, -1]), mask,
+                self._w_factor(Ws, ind_w), self.w_radius_[ind_w] if self.adaptive_bandwidth
+                else None, tau)
+            best = min(best, (float(mse.min()), bw, tau), key=lambda t: t[0])
+        _, self.bandwidth_w_, self.agreement_ = best
         _, ind_t = self._zv_tree.query(self._zv, k=kj + 1)
         ind_t = ind_t[:, 1:]
         dX = self._pose_diff(Theta, Theta[ind_t])
         mask = self._mask(ind_t)
+        self.theta_radius_ = np.linalg.norm(dX[:, -1], axis=1)
+        ad = self.adaptive_bandwidth
         self.bandwidth_theta_, _ = loo_bandwidth(
             dX, y[ind_t], self.GR_[ind_t], y,
-            grid * np.median(np.linalg.norm(dX[:, -1], axis=1)), mask)
+            grid if ad else grid * np.median(self.theta_radius_), mask, None,
+            self.theta_radius_[ind_t] if ad else None)
         return self
 
     def _setup(self) -> None:
@@ -342,9 +378,10 @@ class GSERegressor(BaseEstimator):
         else:
             ind = brute_knn(self._ws, self._ws_sqn, Ws, self.jr_neighbors_)[1]
         mask = self._mask(ind)
+        bw = self.bandwidth_w_ * self.w_radius_[ind] if self.adaptive_bandwidth else self.bandwidth_w_
         r, J, log_sum = gaussian_jr(Ws[:, None, :] - self._ws[ind], self.embedding_[ind],
-                                    self.Gr_[ind], self.bandwidth_w_, mask, jacobian,
-                                    self._w_factor(Ws, ind))
+                                    self.Gr_[ind], bw, mask, jacobian,
+                                    self._w_factor(Ws, ind), self.agreement_)
         if J is not None:
             J /= self.w_scale_
         self._flag(log_sum, "W", r, J)
@@ -357,8 +394,10 @@ class GSERegressor(BaseEstimator):
         _, ind = self._zv_tree.query(self._lift(Theta), k=self.jr_neighbors_)
         ind = np.asarray(ind).reshape(len(Theta), -1)
         mask = self._mask(ind)
+        bw = (self.bandwidth_theta_ * self.theta_radius_[ind] if self.adaptive_bandwidth
+              else self.bandwidth_theta_)
         R, J, log_sum = gaussian_jr(self._pose_diff(Theta, self.theta_[ind]), self.embedding_[ind],
-                                    self.GR_[ind], self.bandwidth_theta_, mask, jacobian)
+                                    self.GR_[ind], bw, mask, jacobian)
         if J is not None:
             J *= self.theta_scale_
         self._flag(log_sum, "Theta", R, J)
