@@ -36,5 +36,8 @@ bench: setup
 	$(RUN) scripts/bench_env.py --cameras
 	$(RUN) scripts/bench_gse.py
 
+reproduce: setup
+	$(RUN) scripts/reproduce_paper.py
+
 clean:
 	rm -rf $(VENV) results .pytest_cache

@@ -220,6 +220,17 @@ def loop_coordinate(X: Array, n_neighbors: int = 10, seed: int = 0, min_radius: 
     return np.arctan2(V[:, 2], V[:, 1])[inverse]
 
 
+def cuts_keep_connected(X: Array, cut: Array, n_neighbors: int) -> bool:
+    """Whether the kNN graph of ``X`` (n, d) stays connected once the links crossing any
+    of the cuts ``cut`` (n, c) (angles, see :func:`same_side`) are removed."""
+    n = X.shape[0]
+    _, ind = knn_graph(X, n_neighbors)
+    allowed = same_side(np.concatenate([cut[:, None, :], cut[ind]], axis=1))[:, 1:]
+    ei, ej = symmetric_edges(ind, allowed)
+    A = sparse.coo_matrix((np.ones(len(ei)), (ei, ej)), shape=(n, n))
+    return connected_components(A, directed=False)[0] == 1
+
+
 def softmax_weights(logw: Array) -> tuple[Array, Array]:
     """Normalised weights from log-weights (n, k) and log of the kernel sum (n,)."""
     mx = logw.max(axis=1, keepdims=True)

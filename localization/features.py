@@ -91,6 +91,8 @@ def batched(n: int, batch_size: int, progress: bool, desc: str) -> Iterator[slic
 def _json_default(obj: Any) -> Any:
     if isinstance(obj, np.generic):
         return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
     if isinstance(obj, os.PathLike):
         return os.fspath(obj)
     raise TypeError(f"setting of type {type(obj).__name__} is not JSON-serialisable: {obj!r}")
@@ -255,6 +257,9 @@ class PixelPCA(FeatureExtractor):
         Scale components to unit variance.
     random_state : int or None
         Seed of the randomized SVD sklearn picks for large inputs.
+    mask : array_like of bool, shape (H, W), or None
+        Use only these pixels (e.g. those looking above the near ground, whose texture
+        moves fast and repeats); None uses all.
 
     Attributes
     ----------
@@ -267,13 +272,20 @@ class PixelPCA(FeatureExtractor):
     name = "pixel_pca"
 
     def __init__(self, n_components: int = 64, grayscale: bool = False, whiten: bool = False,
-                 random_state: int | None = 0) -> None:
+                 random_state: int | None = 0, mask: Any = None) -> None:
         self.n_components = n_components
         self.grayscale = grayscale
         self.whiten = whiten
         self.random_state = random_state
+        self.mask = mask
 
     def _pixels(self, images: np.ndarray) -> np.ndarray:
+        if self.mask is not None:
+            mask = np.asarray(self.mask, dtype=bool)
+            if mask.shape != images.shape[1:3] or not mask.any():
+                raise ValueError(f"mask must be a non-empty boolean (H, W) = "
+                                 f"{images.shape[1:3]} array, got shape {mask.shape}")
+            images = images[:, mask]  # (n, n_pixels, 3)
         x = images.astype(np.float32) / np.float32(255.0)
         if self.grayscale:
             x = x @ np.array([0.299, 0.587, 0.114], dtype=np.float32)

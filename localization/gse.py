@@ -175,7 +175,9 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
         frames of a random subsample (landmarks).
     min_kernel_sum : float, default=1e-8
         Out-of-sample queries whose kernel sum is below this are out of domain.
-    out_of_domain : {"raise", "nan"}, default="raise"
+    out_of_domain : {"raise", "nan", "ignore"}, default="raise"
+        What to do with queries outside the sample domain: raise, return NaN, or return
+        the (normalised, nearest-neighbour dominated) estimate anyway.
     random_state : int, default=0
         Seed of the eigensolver start block.
 
@@ -225,8 +227,9 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
         if self.grassmann_kernel not in _KERNELS:
             raise ValueError(f"unknown grassmann_kernel {self.grassmann_kernel!r}; "
                              f"choose one of {_KERNELS}")
-        if self.out_of_domain not in ("raise", "nan"):
-            raise ValueError(f"out_of_domain must be 'raise' or 'nan', got {self.out_of_domain!r}")
+        if self.out_of_domain not in ("raise", "nan", "ignore"):
+            raise ValueError(f"out_of_domain must be 'raise', 'nan' or 'ignore', got "
+                             f"{self.out_of_domain!r}")
         if self.eigen_solver not in ("auto", "dense", "lu", "lobpcg"):
             raise ValueError(f"unknown eigen_solver {self.eigen_solver!r}")
 
@@ -308,7 +311,7 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
             raise ValueError(f"{bad.sum()} {what} row(s) lie outside the sample domain M* (kernel "
                              f"sum < {self.min_kernel_sum:g}); e.g. row {i}: nearest sample at "
                              f"{dmin[i]:.3g} = {dmin[i] / self.bandwidth_:.1f} bandwidths")
-        return bad
+        return bad & (self.out_of_domain != "ignore")
 
     def transform(self, Z: Array) -> Array:
         """Out-of-sample embedding h(Z) (spec 2.6), shape (n, q); sample-wise."""

@@ -23,18 +23,23 @@ from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from ._graph import Array, brute_knn, check_2d, knn_graph, local_pca, loop_coordinate, same_side
+from ._graph import (
+    Array,
+    brute_knn,
+    check_2d,
+    cuts_keep_connected,
+    knn_graph,
+    local_pca,
+    loop_coordinate,
+    same_side,
+)
 from ._io import load_regressor, save_regressor
+from ._pose import PoseBlockMixin, wrap_angle
 from .gse import GrassmannStiefelEigenmaps
 from .jacobian_regression import AGREEMENT_GRID, BANDWIDTH_GRID, gaussian_jr, loo_bandwidth
 from .model_selection import select_n_neighbors
 
 __all__ = ["GSERegressor", "pinv_blocks", "rrmse", "select_n_neighbors", "wrap_angle"]
-
-
-def wrap_angle(a: Array) -> Array:
-    """Wrap angles to (-pi, pi]."""
-    return np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), 2.0 * np.pi)
 
 
 def rrmse(pred: Array, true: Array, periodic: tuple[int, ...] = ()) -> float:
@@ -54,7 +59,7 @@ def pinv_blocks(H: Array, ridge: float = 0.0) -> Array:
     return np.linalg.solve(HtH, np.swapaxes(H, 1, 2))
 
 
-class GSERegressor(BaseEstimator):
+class GSERegressor(PoseBlockMixin, BaseEstimator):
     """GSE regression between features w (n, m) and poses theta (n, d).
 
     Parameters
@@ -78,7 +83,8 @@ class GSERegressor(BaseEstimator):
         Tikhonov term for ``G_v^{-1}``.
     bandwidth_grid : tuple of float
         Relative grid for the leave-one-out JR bandwidths.
-    out_of_domain : {"raise", "nan"}, default="raise"
+    out_of_domain : {"raise", "nan", "ignore"}, default="raise"
+        Queries whose kernel sum is negligible: raise, NaN, or the estimate anyway.
     random_state : int, default=0
     theta_scale_factor : float, default=2.0
         With theta_scale="auto": lambda_c = factor x median |dw/dtheta_c| (pose columns
@@ -91,7 +97,9 @@ class GSERegressor(BaseEstimator):
         differentiated: embed_jacobian then ignores its (small) derivative.
     loop_cut : {"auto", "none"}, default="auto"
         "auto": if the linear (position) columns of Theta trace a closed loop, cut it
-        open at one place (angle in ``loop_angle_``), like the yaw cut. Needed when
+        open at one place (angle in ``loop_angle_``), like the yaw cut; unless the
+        yaw cut already opens it (a heading that turns once along the loop: the pose
+        graph would fall apart with both cuts). Needed when
         ``n_components`` is smaller than the loop's embedding needs (a closed route
         with n_components=1).
     adaptive_bandwidth : bool, default=False
@@ -157,83 +165,6 @@ class GSERegressor(BaseEstimator):
         self.agreement = agreement
 
     # ----------------------------------------------------------------- geometry
-    def _periodic(self, d: int) -> tuple[int, ...]:
-        per = tuple(sorted({int(c) for c in self.periodic}))
-        if any(c < 0 or c >= d for c in per):
-            raise ValueError(f"periodic={self.periodic} has columns outside Theta's {d} columns")
-        if len(per) > 1:
-            raise ValueError(f"at most one periodic column is supported, got {per}")
-        return per
-
-    def _lift(self, theta: Array) -> Array:
-        """Pose block of Z: scaled linear columns, (cos, sin) x scale for the angle."""
-        cols = []
-        for c in range(theta.shape[1]):
-            lam = self.theta_scale_[c]
-            if c in self._per:
-                cols += [lam * np.cos(theta[:, c]), lam * np.sin(theta[:, c])]
-            else:
-                cols.append(lam * (theta[:, c] - self.theta_center_[c]))
-        return np.column_stack(cols)
-
-    def _unlift(self, zv: Array) -> Array:
-        out, j = [], 0
-        for c in range(len(self.theta_scale_)):
-            if c in self._per:
-                out.append(np.arctan2(zv[:, j + 1], zv[:, j]))
-                j += 2
-            else:
-                out.append(zv[:, j] / self.theta_scale_[c] + self.theta_center_[c])
-                j += 1
-        return np.column_stack(out)
-
-    def _pose_diff(self, theta: Array, theta_nb: Array) -> Array:
-        """Scaled pose differences (n, k, d), angle differences wrapped."""
-        dt = theta[:, None, :] - theta_nb
-        for c in self._per:
-            dt[..., c] = wrap_angle(dt[..., c])
-        return dt * self.theta_scale_
-
-    def _dlift(self, theta: Array) -> Array:
-        """d(pose block)/d(scaled theta), shape (n, p_v, d)."""
-        n, d = theta.shape
-        E = np.zeros((n, d + len(self._per), d))
-        j = 0
-        for c in range(d):
-            if c in self._per:
-                E[:, j, c], E[:, j + 1, c] = -np.sin(theta[:, c]), np.cos(theta[:, c])
-                j += 2
-            else:
-                E[:, j, c] = 1.0
-                j += 1
-        return E
-
-    def _auto_scale(self, Ws: Array, Theta: Array, ind_w: Array) -> Array:
-        """Feature sensitivity |dw/dtheta| per unit group (median over samples) from local
-        least squares of standardised w on theta over *feature-space* neighbours
-        ``ind_w`` (pose-space neighbours would let poses bridge separate feature clusters).
-
-        Groups: all linear columns together (one isotropic scale: x and y share metres),
-        each periodic column alone. The local fit is the minimum-norm least-squares
-        solution ignoring pose directions in which the neighbours spread less than 10 %
-        of the main one: on a 1-D route through a 2-D position space the lateral
-        direction is not observed, and fitting it would blow one column's scale up."""
-        d = Theta.shape[1]
-        self.theta_scale_ = np.ones(d)
-        dT = self._pose_diff(Theta, Theta[ind_w])
-        dW = Ws[:, None, :] - Ws[ind_w]
-        lin = [c for c in range(d) if c not in self._per]
-        groups = ([lin] if lin else []) + [[c] for c in self._per]
-        rms = np.empty((len(Theta), d))  # per-sample RMS of each group, so rcond is unit-free
-        for g in groups:
-            r = np.sqrt((dT[..., g] ** 2).sum(axis=2).mean(axis=1))
-            rms[:, g] = np.maximum(r, np.finfo(float).tiny)[:, None]
-        Jt = np.linalg.pinv(dT / rms[:, None, :], rcond=0.1) @ dW / rms[:, :, None]  # (n, d, m)
-        scale = np.empty(d)
-        for g in groups:
-            scale[g] = np.median(np.linalg.norm(Jt[:, g, :], ord=2, axis=(1, 2)))
-        return scale
-
     # --------------------------------------------------------------------- fit
     def fit(self, W: Array, Theta: Array) -> GSERegressor:
         """Fit on features ``W`` (n, m) and poses ``Theta`` (n, d)."""
@@ -272,6 +203,9 @@ class GSERegressor(BaseEstimator):
         lin = [c for c in range(d) if c not in self._per]
         self.loop_angle_ = (loop_coordinate(Theta[:, lin], k, seed=self.random_state)
                             if self.loop_cut == "auto" and lin else None)
+        if self.loop_angle_ is not None and self._per and not cuts_keep_connected(
+                self._lift(Theta), np.column_stack([Theta[:, self._per], self.loop_angle_]), k):
+            self.loop_angle_ = None  # the heading wraps once along the loop: its cut opens it
         cuts = [Theta[:, c] for c in self._per] + (
             [self.loop_angle_] if self.loop_angle_ is not None else [])
         self.cut_ = np.column_stack(cuts) if cuts else None
@@ -346,7 +280,7 @@ class GSERegressor(BaseEstimator):
 
     def _flag(self, log_sum: Array, what: str, *outs: Array) -> None:
         bad = log_sum < np.log(self.gse_.min_kernel_sum)
-        if bad.any():
+        if bad.any() and self.out_of_domain != "ignore":
             if self.out_of_domain == "raise":
                 raise ValueError(f"{bad.sum()} {what} row(s) are outside the training domain "
                                  f"(kernel sum < {self.gse_.min_kernel_sum:g}), first row "
@@ -430,6 +364,24 @@ class GSERegressor(BaseEstimator):
         R, _ = self._R_star(Theta, False)
         gu, _, _ = self.gse_._recover(R, slice(0, len(self.w_mean_)))
         return gu * self.w_scale_ + self.w_mean_
+
+    def reconstruct(self, W: Array) -> Array:
+        """Reduce-then-recover ``g_u(r*(w))``: features (n, m) rebuilt from their
+        q-dimensional representation (the paper's Fig. 2), original units."""
+        r, _ = self._r_star(W, False)
+        gu, _, _ = self.gse_._recover(r, slice(0, len(self.w_mean_)))
+        return gu * self.w_scale_ + self.w_mean_
+
+    def feature_tangents(self, W: Array) -> Array:
+        """Tangent vectors of the feature manifold at ``g_u(r*(w))``: the feature block
+        ``G_u`` of the recovery Jacobian field (spec 2.7), shape (n, m, q), original units
+        per unit of representation (the paper's Fig. 3)."""
+        r, _ = self._r_star(W, False)
+        out = np.full((len(r), len(self.w_mean_), r.shape[1]), np.nan)
+        ok = np.isfinite(r).all(axis=1)
+        if ok.any():
+            out[ok] = self.gse_.recovery_jacobian(r[ok])[:, :len(self.w_mean_), :]
+        return out * self.w_scale_
 
     def features_jacobian(self, Theta: Array) -> Array:
         """Exact dPhi*/dtheta (n, m, d) in original units (angles in radians): EKF's H."""
