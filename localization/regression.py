@@ -164,7 +164,6 @@ class GSERegressor(PoseBlockMixin, BaseEstimator):
         self.adaptive_bandwidth = adaptive_bandwidth
         self.agreement = agreement
 
-    # ----------------------------------------------------------------- geometry
     # --------------------------------------------------------------------- fit
     def fit(self, W: Array, Theta: Array) -> GSERegressor:
         """Fit on features ``W`` (n, m) and poses ``Theta`` (n, d)."""
@@ -173,6 +172,12 @@ class GSERegressor(PoseBlockMixin, BaseEstimator):
             raise ValueError(f"W has {W.shape[0]} rows but Theta has {Theta.shape[0]}")
         (n, m), d = W.shape, Theta.shape[1]
         self._per = self._periodic(d)
+        if self.loop_cut not in ("auto", "none"):
+            raise ValueError(f"loop_cut must be 'auto' or 'none', got {self.loop_cut!r}")
+        if not (self.agreement in (None, "auto") or (
+                isinstance(self.agreement, (int, float)) and self.agreement > 0)):
+            raise ValueError(f"agreement must be None, 'auto' or a positive number, got "
+                             f"{self.agreement!r}")
         q = d if self.n_components is None else self.n_components
         k = self.n_neighbors
         if n <= k + 1:
@@ -198,8 +203,6 @@ class GSERegressor(PoseBlockMixin, BaseEstimator):
                              "theta_scale='auto' a zero means the features do not vary with "
                              "that Theta column (drop it or pass theta_scale explicitly)")
         self.theta_ = Theta
-        if self.loop_cut not in ("auto", "none"):
-            raise ValueError(f"loop_cut must be 'auto' or 'none', got {self.loop_cut!r}")
         lin = [c for c in range(d) if c not in self._per]
         self.loop_angle_ = (loop_coordinate(Theta[:, lin], k, seed=self.random_state)
                             if self.loop_cut == "auto" and lin else None)
@@ -228,7 +231,13 @@ class GSERegressor(PoseBlockMixin, BaseEstimator):
         s = np.linalg.svd(Hv, compute_uv=False)
         self.pose_condition_ = s[:, 0] / np.maximum(s[:, -1], np.finfo(float).tiny)
         self._setup()
-        # leave-one-out bandwidths of the two Jacobian regressions
+        self._select_bandwidths(Ws, Theta, dist_w, ind_w)
+        return self
+
+    def _select_bandwidths(self, Ws: Array, Theta: Array, dist_w: Array, ind_w: Array) -> None:
+        """Leave-one-out bandwidths (and agreement scale) of the two Jacobian regressions
+        r* (features) and R* (poses)."""
+        n, k = len(Ws), self.n_neighbors
         y = self.embedding_
         self.jr_neighbors_ = kj = min(self.jr_neighbors or k, n - 2)
         if kj != k:
@@ -261,7 +270,6 @@ class GSERegressor(PoseBlockMixin, BaseEstimator):
             dX, y[ind_t], self.GR_[ind_t], y,
             grid if ad else grid * np.median(self.theta_radius_), mask, None,
             self.theta_radius_[ind_t] if ad else None)
-        return self
 
     def _setup(self) -> None:
         """Derived per-sample query structures (after fit or load)."""

@@ -139,7 +139,7 @@ def figure_model(images: np.ndarray, P: np.ndarray, tr: np.ndarray, te: np.ndarr
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         gse, _, _ = fit_gse(pca.transform(images[tr]), P[tr], 1, cv=args.cv,
-                            grid={"n_neighbors": [10], "theta_scale_factor": [20.0]},
+                            grid={"n_neighbors": [10], "theta_scale_factor": [100.0]},
                             seed=args.split_seed)
     return pca, gse, images, te
 
@@ -183,7 +183,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                 W_tr = extractor.fit_transform(images[tr])
                 W_te = extractor.transform(images[te])
                 t_feat = time.perf_counter() - t1
-                grid = ({"n_neighbors": [10], "theta_scale_factor": [20.0]} if args.quick
+                grid = ({"n_neighbors": [10], "theta_scale_factor": [100.0]} if args.quick
                         else None)
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", RuntimeWarning)  # weak eigen-gap notes

@@ -374,3 +374,13 @@ def test_reconstruct_and_feature_tangents(planar):
     Qt = np.linalg.qr(phi.jacobian(Tt))[0]
     cos = np.linalg.svd(np.swapaxes(Qg, 1, 2) @ Qt, compute_uv=False)[:, -1]
     assert np.median(np.degrees(np.arccos(np.clip(cos, -1, 1)))) < 15  # measured 7.4 deg
+
+
+def test_new_options_are_validated():
+    W, T, _ = regression_manifold(200, dim_theta=2, seed=0)
+    with pytest.raises(ValueError, match="loop_cut"):
+        GSERegressor(loop_cut="yes").fit(W, T)
+    with pytest.raises(ValueError, match="agreement"):
+        GSERegressor(agreement=-1.0).fit(W, T)
+    with pytest.raises(ValueError, match="agreement"):
+        GSERegressor(agreement="robust").fit(W, T)
