@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -154,7 +155,14 @@ def collect(camera: str, mode: str, args: Args) -> tuple[np.ndarray, np.ndarray]
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
+    """Run the experiment; BLAS on one thread (GSE's many small matrix products thrash on
+    a shared machine with threaded BLAS), torch on ``--num-threads`` for the CNNs."""
     args = parse_args(argv)
+    with threadpool_limits(limits=1, user_api="blas"):
+        return run(args)
+
+
+def run(args: Args) -> dict[str, Any]:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
