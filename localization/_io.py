@@ -24,7 +24,7 @@ def save_regressor(model: Any, path: str | Path) -> None:
         "bandwidth_w_": model.bandwidth_w_, "bandwidth_theta_": model.bandwidth_theta_,
         "jr_neighbors_": model.jr_neighbors_, "pca_bw": model._pca_bw,
         "gse_bandwidth_": g.bandwidth_, "recovery_bandwidth_": g.recovery_bandwidth_,
-        "n_edges_": g.n_edges_, "agreement_": model.agreement_, "format": 1}
+        "n_edges_": g.n_edges_, "agreement_": model.agreement_, "format": 2}
     if isinstance(settings["params"]["theta_scale"], np.ndarray):
         settings["params"]["theta_scale"] = settings["params"]["theta_scale"].tolist()
     arrays = {k: getattr(model, k) if hasattr(model, k) else getattr(g, k) for k in _ARRAYS}
@@ -54,9 +54,12 @@ def load_regressor(cls: Any, path: str | Path) -> Any:
         model.cut_ = g.cut_
         la = data.get("loop_angle_")
         model.loop_angle_ = la if la is not None and la.size else None
-        for key in ("w_radius_", "theta_radius_"):
-            setattr(model, key, np.asarray(data[key], dtype=np.float64))
-            if getattr(model, key).shape != (len(data["theta_"]),):
+        n_s = len(data["theta_"])
+        for key in ("w_radius_", "theta_radius_"):  # format 1 files predate them: only the
+            # (then nonexistent) adaptive_bandwidth option reads them
+            value = data.get(key, np.full(n_s, np.nan))
+            setattr(model, key, np.asarray(value, dtype=np.float64))
+            if getattr(model, key).shape != (n_s,):
                 raise ValueError(f"{key} has the wrong shape")
         g.bandwidth_, g.n_edges_ = float(s["gse_bandwidth_"]), int(s["n_edges_"])
         g.recovery_bandwidth_ = float(s["recovery_bandwidth_"])

@@ -384,3 +384,16 @@ def test_new_options_are_validated():
         GSERegressor(agreement=-1.0).fit(W, T)
     with pytest.raises(ValueError, match="agreement"):
         GSERegressor(agreement="robust").fit(W, T)
+
+
+def test_load_reads_format_1_files(planar, tmp_path):
+    """Files saved before the loop cut and the adaptive options (format 1) still load."""
+    *_, Wt, _Tt, _, model = planar
+    model.save(tmp_path / "new.npz")
+    with np.load(tmp_path / "new.npz", allow_pickle=False) as f:
+        data = {k: f[k] for k in f.files if k not in ("w_radius_", "theta_radius_",
+                                                          "loop_angle_")}
+    np.savez(tmp_path / "old.npz", **data)
+    old = GSERegressor.load(tmp_path / "old.npz")
+    assert old.loop_angle_ is None
+    assert np.array_equal(old.predict(Wt), model.predict(Wt))
