@@ -17,6 +17,9 @@ the three regressors features -> pose of Table II, every hyper-parameter chosen 
 - ``"knn"``: :class:`~localization.baselines.RetrievalRegressor` (image retrieval), k by
   CV inside ``fit``, standardisation by CV.
 
+The feature dimension (leading PCA components) is chosen per method by the same CV
+(``feature_dims``).
+
 Errors: position RRMSE (:func:`~localization.metrics.rrmse` over x, y), median / 95th
 percentile / max position error in metres, and the heading RMSE when poses have a yaw.
 """
@@ -90,15 +93,34 @@ def evaluate_methods(W_tr: Array, P_tr: Array, W_te: Array, P_te: Array, q: int,
                      periodic: tuple[int, ...] = (), cv: int = 3, seed: int = 0,
                      gse_grid: dict[str, list[Any]] | None = None,
                      methods: tuple[str, ...] = ("gse", "knr", "knn"),
+                     feature_dims: tuple[int, ...] | None = None,
                      ) -> tuple[list[MethodResult], dict[str, Array], dict[str, Any]]:
     """Fit every method on the training split (hyper-parameters by CV there) and score it
     on the test split. Returns the results, the test predictions and the fitted models,
-    both by method name."""
+    both by method name.
+
+    ``feature_dims``: candidate feature dimensions m, chosen per method by the same CV
+    (the leading m columns: the features must be ordered by importance, like PCA
+    components); None uses all columns. A model in the returned dict takes the leading
+    ``params["n_features"]`` columns."""
     out, preds, models = [], {}, {}
+    dims = [W_tr.shape[1]] if feature_dims is None else sorted(
+        {min(int(m), W_tr.shape[1]) for m in feature_dims})
     for name in methods:
         t0 = time.perf_counter()
         try:
-            model, params, rows = _fit_method(name, W_tr, P_tr, q, periodic, cv, seed, gse_grid)
+            best = None
+            for m in dims:
+                model, params, rows = _fit_method(name, W_tr[:, :m], P_tr, q, periodic, cv,
+                                                  seed, gse_grid)
+                score = min(r["rrmse"] for r in rows)
+                rows = [{**r, "n_features": m} for r in rows]
+                if best is None or score < best[0]:
+                    best = (score, model, {**params, "n_features": m}, rows + best[3] if best
+                            else rows)
+                else:
+                    best = (*best[:3], best[3] + rows)
+            _, model, params, rows = best  # type: ignore[misc]
         except ValueError as exc:  # e.g. every GSE candidate has a disconnected graph
             nan = float("nan")
             out.append(MethodResult(name, nan, nan, nan, nan, nan if P_te.shape[1] > 2 else None,
@@ -106,7 +128,7 @@ def evaluate_methods(W_tr: Array, P_tr: Array, W_te: Array, P_te: Array, q: int,
                                     fit_s=time.perf_counter() - t0))
             continue
         fit_s = time.perf_counter() - t0
-        pred = np.asarray(model.predict(W_te), dtype=np.float64)
+        pred = np.asarray(model.predict(W_te[:, :params["n_features"]]), dtype=np.float64)
         preds[name], models[name] = pred, model
         heading = angular_rmse(pred[:, 2], P_te[:, 2]) if P_te.shape[1] > 2 else None
         out.append(MethodResult(name, heading_rmse=heading, params=params, cv=rows,
