@@ -39,5 +39,8 @@ bench: setup
 	@test -f results/localizer.npz || $(RUN) scripts/demo.py
 	$(RUN) scripts/bench_agents.py
 
+reproduce: setup
+	$(RUN) scripts/reproduce_paper.py
+
 clean:
 	rm -rf $(VENV) results .pytest_cache

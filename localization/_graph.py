@@ -159,14 +159,79 @@ def brute_knn(X: Array, sqnorm: Array, Xq: Array, k: int) -> tuple[Array, NDArra
 
 
 def same_side(cut_nb: Array) -> NDArray[np.bool_]:
-    """Mask of neighbours on the same side of a cut at +-pi as the nearest one.
+    """Mask of neighbours on the same side of every cut at +-pi as the nearest one.
 
-    ``cut_nb`` (n, k): the periodic coordinate (radians, in (-pi, pi]) of each
-    neighbour, nearest first. A neighbour is kept when the unwrapped difference
-    to the nearest neighbour is at most pi (the segment between them does not
-    cross the cut).
+    ``cut_nb`` (n, k) or (n, k, c): the periodic cut coordinates (radians, in (-pi, pi])
+    of each neighbour, nearest first. A neighbour is kept when, for every cut, the
+    unwrapped difference to the nearest neighbour is at most pi (the segment between
+    them does not cross the cut).
     """
-    return np.abs(cut_nb - cut_nb[:, :1]) <= np.pi
+    keep = np.abs(cut_nb - cut_nb[:, :1]) <= np.pi
+    return keep if keep.ndim == 2 else keep.all(axis=2)
+
+
+def loop_coordinate(X: Array, n_neighbors: int = 10, seed: int = 0, min_radius: float = 0.5,
+                    max_ratio: float = 2.0) -> Array | None:
+    """Angle along a closed loop traced by the sample, or None if it is not a loop.
+
+    The first two non-trivial eigenvectors of the random-walk Laplacian of the
+    (unweighted, symmetrised) kNN graph of a sample along a closed curve (or a thin tube around one) are a cosine / sine pair
+    of the position along the curve, so ``atan2(v2, v1)`` is a monotone loop angle.
+    On a disc-like sample the same pair passes through the origin (e.g.
+    ``cos(pi x), cos(pi y)`` on a square), and on an open path the pair is
+    ``cos(pi t), cos(2 pi t)`` with eigenvalues in ratio ~4. Loop test: the two
+    eigenvalues differ by less than ``max_ratio`` and the 1st percentile of the radius
+    ``|(v1, v2)|`` is at least ``min_radius`` x its median.
+
+    Parameters
+    ----------
+    X : ndarray of shape (n, d)
+        Low-dimensional coordinates (e.g. positions in metres).
+    n_neighbors : int, default=10
+    seed : int, default=0
+    min_radius : float, default=0.5
+    max_ratio : float, default=2.0
+
+    Returns
+    -------
+    angle : ndarray of shape (n,) in (-pi, pi], or None
+    """
+    X, inverse = np.unique(X, axis=0, return_inverse=True)  # e.g. one position, many headings
+    inverse = inverse.ravel()
+    n = X.shape[0]
+    if n < 4 * n_neighbors:
+        return None
+    _, ind = knn_graph(X, n_neighbors)
+    ei, ej = symmetric_edges(ind)
+    if connected_components(sparse.coo_matrix((np.ones(len(ei)), (ei, ej)), shape=(n, n)),
+                            directed=False)[0] > 1:
+        return None
+    # unweighted links: Gaussian weights would make a sparse stretch of the loop a weak
+    # link, and the eigenvector pair then localises instead of going round
+    A = sparse.coo_matrix((np.ones(len(ei)), (ei, ej)), shape=(n, n))
+    A = (A + A.T).tocsr()
+    deg = np.asarray(A.sum(axis=1)).ravel()
+    # shift-invert with one sparse LU at any size: a planar kNN graph factorises cheaply,
+    # and LOBPCG from a random start misses the near-degenerate pair (n = 10000)
+    lam, V = smallest_generalized_eigs((sparse.diags(deg) - A).tocsr(), deg, 3, seed,
+                                       lu_max=10 ** 7)
+    if not lam[2] < max_ratio * lam[1]:  # a path has lambda_2 ~ 4 lambda_1, a loop a pair
+        return None
+    r = np.hypot(V[:, 1], V[:, 2])
+    if np.percentile(r, 1) < min_radius * np.median(r):
+        return None
+    return np.arctan2(V[:, 2], V[:, 1])[inverse]
+
+
+def cuts_keep_connected(X: Array, cut: Array, n_neighbors: int) -> bool:
+    """Whether the kNN graph of ``X`` (n, d) stays connected once the links crossing any
+    of the cuts ``cut`` (n, c) (angles, see :func:`same_side`) are removed."""
+    n = X.shape[0]
+    _, ind = knn_graph(X, n_neighbors)
+    allowed = same_side(np.concatenate([cut[:, None, :], cut[ind]], axis=1))[:, 1:]
+    ei, ej = symmetric_edges(ind, allowed)
+    A = sparse.coo_matrix((np.ones(len(ei)), (ei, ej)), shape=(n, n))
+    return connected_components(A, directed=False)[0] == 1
 
 
 def softmax_weights(logw: Array) -> tuple[Array, Array]:

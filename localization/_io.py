@@ -24,11 +24,13 @@ def save_regressor(model: Any, path: str | Path) -> None:
         "bandwidth_w_": model.bandwidth_w_, "bandwidth_theta_": model.bandwidth_theta_,
         "jr_neighbors_": model.jr_neighbors_, "pca_bw": model._pca_bw,
         "gse_bandwidth_": g.bandwidth_, "recovery_bandwidth_": g.recovery_bandwidth_,
-        "n_edges_": g.n_edges_, "format": 1}
+        "n_edges_": g.n_edges_, "agreement_": model.agreement_, "format": 2}
     if isinstance(settings["params"]["theta_scale"], np.ndarray):
         settings["params"]["theta_scale"] = settings["params"]["theta_scale"].tolist()
     arrays = {k: getattr(model, k) if hasattr(model, k) else getattr(g, k) for k in _ARRAYS}
     arrays["cut_"] = np.zeros(0) if g.cut_ is None else g.cut_
+    arrays["loop_angle_"] = np.zeros(0) if model.loop_angle_ is None else model.loop_angle_
+    arrays["w_radius_"], arrays["theta_radius_"] = model.w_radius_, model.theta_radius_
     np.savez(path, settings=np.array(json.dumps(settings)), **arrays)
 
 
@@ -47,11 +49,23 @@ def load_regressor(cls: Any, path: str | Path) -> Any:
         for k in _ARRAYS:
             setattr(model if k.endswith(("mean_", "center_", "scale_")) or k in
                     ("theta_", "Gr_", "GR_") else g, k, np.asarray(data[k], dtype=np.float64))
-        g.cut_ = data["cut_"] if data["cut_"].size else None
+        cut = data["cut_"]
+        g.cut_ = (cut[:, None] if cut.ndim == 1 else cut) if cut.size else None
+        model.cut_ = g.cut_
+        la = data.get("loop_angle_")
+        model.loop_angle_ = la if la is not None and la.size else None
+        n_s = len(data["theta_"])
+        for key in ("w_radius_", "theta_radius_"):  # format 1 files predate them: only the
+            # (then nonexistent) adaptive_bandwidth option reads them
+            value = data.get(key, np.full(n_s, np.nan))
+            setattr(model, key, np.asarray(value, dtype=np.float64))
+            if getattr(model, key).shape != (n_s,):
+                raise ValueError(f"{key} has the wrong shape")
         g.bandwidth_, g.n_edges_ = float(s["gse_bandwidth_"]), int(s["n_edges_"])
         g.recovery_bandwidth_ = float(s["recovery_bandwidth_"])
         g.n_components_graph_ = 1
         model.w_scale_ = float(s["w_scale_"])
+        model.agreement_ = s.get("agreement_")
         model.jr_neighbors_ = int(s["jr_neighbors_"])
         model._pca_bw = float(s["pca_bw"])
         model.bandwidth_w_, model.bandwidth_theta_ = (float(s["bandwidth_w_"]),
@@ -63,7 +77,7 @@ def load_regressor(cls: Any, path: str | Path) -> Any:
                      and g.embedding_.shape == (n, q) and model.theta_.shape == (n, d)
                      and model.Gr_.shape == (n, q, m) and model.GR_.shape == (n, q, d)
                      and p_ == m + d + len(model._per)
-                     and (g.cut_ is None or g.cut_.shape == (n,)))
+                     and (g.cut_ is None or g.cut_.shape[0] == n))
         if not shapes_ok:
             raise ValueError("inconsistent array shapes")
         if not all(np.isfinite(getattr(model if hasattr(model, k) else g, k)).all()

@@ -26,11 +26,11 @@ from typing import Any, ClassVar
 import numpy as np
 import torch
 from sklearn.base import BaseEstimator, TransformerMixin
-from sklearn.decomposition import PCA
 from sklearn.exceptions import NotFittedError
 from tqdm.auto import tqdm
 
 from localization import efficientnet as enet
+from localization._pca import fit_pca, pca_from_state, pca_state
 
 __all__ = [
     "EfficientNetFeatures",
@@ -91,6 +91,8 @@ def batched(n: int, batch_size: int, progress: bool, desc: str) -> Iterator[slic
 def _json_default(obj: Any) -> Any:
     if isinstance(obj, np.generic):
         return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
     if isinstance(obj, os.PathLike):
         return os.fspath(obj)
     raise TypeError(f"setting of type {type(obj).__name__} is not JSON-serialisable: {obj!r}")
@@ -107,47 +109,6 @@ def read_settings(state: dict[str, np.ndarray]) -> dict[str, Any]:
     raw = np.asarray(state["settings"])
     text = raw.tobytes().decode() if raw.dtype == np.uint8 else str(raw[()])
     return json.loads(text)
-
-
-_PCA_ARRAYS = ("components_", "mean_", "explained_variance_", "explained_variance_ratio_",
-               "singular_values_")
-
-
-def pca_state(pca: PCA | None, prefix: str = "pca/") -> dict[str, np.ndarray]:
-    """Arrays of a fitted PCA (components_, mean_, explained_variance_, ...) or {} for None."""
-    if pca is None:
-        return {}
-    out = {prefix + k: np.asarray(getattr(pca, k)) for k in _PCA_ARRAYS}
-    out[prefix + "noise_variance_"] = np.asarray(pca.noise_variance_, dtype=np.float64)
-    return out
-
-
-def pca_from_state(state: dict[str, np.ndarray], whiten: bool, prefix: str = "pca/") -> PCA | None:
-    """Rebuild a fitted sklearn PCA from :func:`pca_state` arrays (None if absent)."""
-    if prefix + "components_" not in state:
-        return None
-    comps = np.asarray(state[prefix + "components_"])
-    pca = PCA(n_components=comps.shape[0], whiten=whiten)
-    for k in _PCA_ARRAYS:
-        setattr(pca, k, np.ascontiguousarray(state[prefix + k], dtype=np.float64))
-    pca.noise_variance_ = float(np.asarray(state[prefix + "noise_variance_"]))
-    pca.n_components_ = comps.shape[0]
-    pca.n_features_in_ = comps.shape[1]
-    pca.n_samples_ = comps.shape[0]
-    return pca
-
-
-def fit_pca(x: np.ndarray, n_components: int, whiten: bool, random_state: int | None) -> PCA:
-    """PCA with n_components clipped to min(n_samples, n_features) (no error for small n).
-
-    The fitted arrays are stored as C-contiguous float64, like those :func:`pca_from_state`
-    rebuilds, so that a saved and reloaded PCA transforms bit-identically.
-    """
-    k = int(min(n_components, x.shape[0], x.shape[1]))
-    pca = PCA(n_components=k, whiten=whiten, random_state=random_state).fit(x)
-    for name in _PCA_ARRAYS:  # one dtype and memory layout, so a reloaded PCA is bit-identical
-        setattr(pca, name, np.ascontiguousarray(getattr(pca, name), dtype=np.float64))
-    return pca
 
 
 class FeatureExtractor(TransformerMixin, BaseEstimator):
@@ -255,6 +216,9 @@ class PixelPCA(FeatureExtractor):
         Scale components to unit variance.
     random_state : int or None
         Seed of the randomized SVD sklearn picks for large inputs.
+    mask : array_like of bool, shape (H, W), or None
+        Use only these pixels (e.g. those looking above the near ground, whose texture
+        moves fast and repeats); None uses all.
 
     Attributes
     ----------
@@ -267,13 +231,20 @@ class PixelPCA(FeatureExtractor):
     name = "pixel_pca"
 
     def __init__(self, n_components: int = 64, grayscale: bool = False, whiten: bool = False,
-                 random_state: int | None = 0) -> None:
+                 random_state: int | None = 0, mask: Any = None) -> None:
         self.n_components = n_components
         self.grayscale = grayscale
         self.whiten = whiten
         self.random_state = random_state
+        self.mask = mask
 
     def _pixels(self, images: np.ndarray) -> np.ndarray:
+        if self.mask is not None:
+            mask = np.asarray(self.mask, dtype=bool)
+            if mask.shape != images.shape[1:3] or not mask.any():
+                raise ValueError(f"mask must be a non-empty boolean (H, W) = "
+                                 f"{images.shape[1:3]} array, got shape {mask.shape}")
+            images = images[:, mask]  # (n, n_pixels, 3)
         x = images.astype(np.float32) / np.float32(255.0)
         if self.grayscale:
             x = x @ np.array([0.299, 0.587, 0.114], dtype=np.float32)

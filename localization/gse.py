@@ -19,6 +19,7 @@ from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
+from ._alignment import _KERNELS, _edge_products, align_frames, grassmann_kernel, landmark_frames
 from ._graph import (
     _CHUNK,
     Array,
@@ -29,104 +30,12 @@ from ._graph import (
     local_pca,
     polar,
     same_side,
-    smallest_generalized_eigs,
     softmax_weights,
     symmetric_edges,
 )
 from .jacobian_regression import jacobian_regression
 
-_KERNELS = ("binet_cauchy", "projection", "none")
-
-
-def grassmann_kernel(S: Array, kind: str = "binet_cauchy") -> Array:
-    """Grassmann kernel from the products ``S = Q^T Q'`` (..., q, q), values in [0, 1]."""
-    if kind == "binet_cauchy":
-        return np.linalg.det(S) ** 2
-    if kind == "projection":
-        return (S ** 2).sum(axis=(-2, -1)) / S.shape[-1]
-    if kind == "none":
-        return np.ones(S.shape[:-2])
-    raise ValueError(f"unknown grassmann_kernel {kind!r}; choose one of {_KERNELS}")
-
-
-def landmark_frames(Z: Array, Q: Array, n_landmarks: int, n_neighbors: int, kernel: str,
-                    seed: int = 0) -> Array | None:
-    """Coarse frame field for a warm start: align the frames of a random subsample
-    (with the full-sample tangents) and extend them to every point by
-    ``H_i = Q_i polar(Q_i^T sum_l K_il H_l)``. None if the subsample graph is
-    disconnected."""
-    n = Q.shape[0]
-    lm = np.sort(np.random.default_rng(seed).permutation(n)[:n_landmarks])
-    dist, ind = knn_graph(Z[lm], n_neighbors)
-    sigma = 0.5 * float(np.median(dist[:, -1]))
-    ei, ej = symmetric_edges(ind)
-    try:
-        check_connected(len(lm), ei, ej, "landmarks")
-    except ValueError:
-        return None
-    S = _edge_products(Q[lm], ei, ej)
-    K = np.exp(-0.5 * ((Z[lm][ei] - Z[lm][ej]) ** 2).sum(axis=1) / sigma ** 2)
-    K = K * grassmann_kernel(S, kernel) + 1e-300
-    Hl, _, _ = align_frames(Q[lm], ei, ej, K, n_refine=2, seed=seed, S=S)
-    d2, nb = brute_knn(Z[lm], (Z[lm] ** 2).sum(axis=1), Z, n_neighbors)
-    with np.errstate(divide="ignore"):
-        logw = -0.5 * d2 / sigma ** 2 + np.log(grassmann_kernel(
-            np.einsum("npa,nkpb->nkab", Q, Q[lm][nb]), kernel))
-    w, _ = softmax_weights(logw)
-    return Q @ polar(np.einsum("npa,nk,nkpb->nab", Q, w, Hl[nb]))
-
-
-def _edge_products(Q: Array, ei: Array, ej: Array) -> Array:
-    """``Q_i^T Q_j`` for every edge, shape (E, q, q), in chunks."""
-    q = Q.shape[2]
-    if len(ei) == 0:
-        return np.zeros((0, q, q))
-    return np.concatenate([np.einsum("epa,epb->eab", Q[ei[s:s + 20000]], Q[ej[s:s + 20000]])
-                           for s in range(0, len(ei), 20000)])
-
-
-def align_frames(Q: Array, ei: Array, ej: Array, K: Array, n_refine: int = 5, seed: int = 0,
-                 dense_max: int = 1500, S: Array | None = None, H0: Array | None = None,
-                 lu_max: int = 6000) -> tuple[Array, Array, Array]:
-    """Polarised Stiefel alignment (spec 2.4(b)).
-
-    Links ``O_ij = polar(Q_i^T Q_j)``, blocks ``A_ij = K_ij O_ij``; the smallest q
-    generalized eigenvectors of ``(D - A) V = lambda D V`` give blocks ``v_i``,
-    projected onto O(q); then ``n_refine`` sweeps ``H_i <- Q_i polar(Q_i^T sum_j K_ij H_j)``.
-
-    Returns
-    -------
-    H : ndarray of shape (n, p, q)
-        Orthonormal frames with ``Span H_i = Span Q_i``.
-    eigenvalues : ndarray of shape (q + 1,)
-        The q wanted and the (q+1)-th generalized eigenvalue (gap diagnostic).
-    condition : ndarray of shape (n,)
-        Condition numbers of the blocks ``v_i`` before polar projection.
-    """
-    n, p, q = Q.shape
-    if S is None:
-        S = _edge_products(Q, ei, ej)
-    blocks = K[:, None, None] * polar(S)
-    a = np.arange(q)
-    rows = (ei[:, None, None] * q + a[None, :, None]).repeat(q, axis=2)
-    cols = (ej[:, None, None] * q + a[None, None, :]).repeat(q, axis=1)
-    A = sparse.coo_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(n * q, n * q))
-    A = (A + A.T).tocsr()
-    deg = np.bincount(ei, K, n) + np.bincount(ej, K, n)
-    d = np.repeat(deg, q)
-    X0 = None if H0 is None else (np.swapaxes(Q, 1, 2) @ H0).reshape(n * q, q)
-    lam, V = smallest_generalized_eigs(sparse.diags(d) - A, d, q + 1, seed, dense_max, lu_max, X0)
-    v = V[:, :q].reshape(n, q, q)
-    s = np.linalg.svd(v, compute_uv=False)
-    condition = s[:, 0] / np.maximum(s[:, -1], np.finfo(float).tiny)
-    H = Q @ polar(v)
-    Ks = sparse.coo_matrix((K, (ei, ej)), shape=(n, n))
-    Ks = (Ks + Ks.T).tocsr()
-    for _ in range(n_refine):
-        M = (Ks @ H.reshape(n, p * q)).reshape(n, p, q)
-        H = Q @ polar(np.swapaxes(Q, 1, 2) @ M)
-    return H, lam, condition
-
+__all__ = ["GrassmannStiefelEigenmaps", "align_frames", "embed_from_frames", "grassmann_kernel"]
 
 def embed_from_frames(Z: Array, H: Array, ei: Array, ej: Array, K: Array) -> Array:
     """Solve ``L Y = B`` (spec 2.5) for zero-mean coordinates Y (n, q).
@@ -175,7 +84,9 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
         frames of a random subsample (landmarks).
     min_kernel_sum : float, default=1e-8
         Out-of-sample queries whose kernel sum is below this are out of domain.
-    out_of_domain : {"raise", "nan"}, default="raise"
+    out_of_domain : {"raise", "nan", "ignore"}, default="raise"
+        What to do with queries outside the sample domain: raise, return NaN, or return
+        the (normalised, nearest-neighbour dominated) estimate anyway.
     random_state : int, default=0
         Seed of the eigensolver start block.
 
@@ -225,8 +136,9 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
         if self.grassmann_kernel not in _KERNELS:
             raise ValueError(f"unknown grassmann_kernel {self.grassmann_kernel!r}; "
                              f"choose one of {_KERNELS}")
-        if self.out_of_domain not in ("raise", "nan"):
-            raise ValueError(f"out_of_domain must be 'raise' or 'nan', got {self.out_of_domain!r}")
+        if self.out_of_domain not in ("raise", "nan", "ignore"):
+            raise ValueError(f"out_of_domain must be 'raise', 'nan' or 'ignore', got "
+                             f"{self.out_of_domain!r}")
         if self.eigen_solver not in ("auto", "dense", "lu", "lobpcg"):
             raise ValueError(f"unknown eigen_solver {self.eigen_solver!r}")
 
@@ -234,9 +146,10 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
             ) -> GrassmannStiefelEigenmaps:
         """Learn the tangent bundle of the sample ``Z`` (n, p).
 
-        ``cut`` (n,), optional: a periodic coordinate in radians; graph links whose
-        unwrapped difference exceeds pi are removed, so a closed loop is cut open
-        at +-pi and embedded as one chart (spec section 9).
+        ``cut`` (n,) or (n, c), optional: periodic coordinates in radians (e.g. a
+        heading, or the angle along a closed route); graph links whose unwrapped
+        difference in any of them exceeds pi are removed, so each closed loop is cut
+        open at +-pi and the sample is embedded as one chart (spec section 9).
         """
         Z = check_2d(Z, "Z")
         n, p = Z.shape
@@ -248,12 +161,16 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
         if not sigma > 0:
             raise ValueError(f"bandwidth must be positive, got {sigma}")
         Q = local_pca(Z, Z, ind, np.exp(-0.5 * (dist / sigma) ** 2), q)
-        self.cut_ = None if cut is None else np.asarray(cut, dtype=np.float64).ravel()
-        if self.cut_ is not None and (self.cut_.shape != (n,) or not np.isfinite(self.cut_).all()):
-            raise ValueError(f"cut must be {n} finite angles (one per sample), got shape "
-                             f"{np.shape(cut)}")
+        self.cut_ = None
+        if cut is not None:
+            c = np.asarray(cut, dtype=np.float64)
+            c = c[:, None] if c.ndim == 1 else c
+            if c.ndim != 2 or c.shape[0] != n or not np.isfinite(c).all():
+                raise ValueError(f"cut must be {n} finite angles per cut (shape ({n},) or "
+                                 f"({n}, c)), got shape {np.shape(cut)}")
+            self.cut_ = c
         allowed = None if cut is None else same_side(
-            np.column_stack([self.cut_, self.cut_[ind]]))[:, 1:]
+            np.concatenate([self.cut_[:, None, :], self.cut_[ind]], axis=1))[:, 1:]
         ei, ej = symmetric_edges(ind, allowed)
         d2 = np.concatenate([((Z[ei[s:s + 50000]] - Z[ej[s:s + 50000]]) ** 2).sum(axis=1)
                              for s in range(0, len(ei), 50000)])
@@ -303,7 +220,7 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
             raise ValueError(f"{bad.sum()} {what} row(s) lie outside the sample domain M* (kernel "
                              f"sum < {self.min_kernel_sum:g}); e.g. row {i}: nearest sample at "
                              f"{dmin[i]:.3g} = {dmin[i] / self.bandwidth_:.1f} bandwidths")
-        return bad
+        return bad & (self.out_of_domain != "ignore")
 
     def transform(self, Z: Array) -> Array:
         """Out-of-sample embedding h(Z) (spec 2.6), shape (n, q); sample-wise."""
@@ -333,7 +250,20 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
     def _recover(self, Y: Array, cols: np.ndarray | slice = slice(None), jacobian: bool = False
                  ) -> tuple[Array, Array | None, Array]:
         """g(Y) restricted to ambient columns ``cols`` (JR in y with slopes H_j, bandwidth
-        ``recovery_bandwidth_``) and its exact Jacobian dg/dy."""
+        ``recovery_bandwidth_``) and its exact Jacobian dg/dy. Rows of ``Y`` with NaN
+        (out-of-domain representations) give NaN."""
+        fin = np.isfinite(Y).all(axis=1)
+        if not fin.all():
+            p = self.Z_[:, cols].shape[1]
+            g = np.full((len(Y), p), np.nan)
+            J = np.full((len(Y), p, Y.shape[1]), np.nan) if jacobian else None
+            bad = ~fin
+            if fin.any():
+                gf, Jf, bf = self._recover(Y[fin], cols, jacobian)
+                g[fin], bad[fin] = gf, bf
+                if J is not None:
+                    J[fin] = Jf
+            return g, J, bad
         k = self.n_neighbors
         d, ind = self._ytree.query(Y, k=k)
         d, ind = np.asarray(d).reshape(len(Y), k), np.asarray(ind).reshape(len(Y), k)

@@ -24,6 +24,8 @@ from sklearn.utils.validation import check_is_fitted
 from ._graph import Array, brute_knn, check_2d, softmax_weights
 
 BANDWIDTH_GRID = (0.25, 0.35, 0.5, 0.7, 1.0, 1.4, 2.0)
+#: Factors (of the median y-distance to the k-th neighbour) tried by ``agreement="auto"``.
+AGREEMENT_GRID = (0.5, 1.0, 2.0, 4.0)
 
 
 def jacobian_regression(dX: Array, Y_nb: Array, G_nb: Array, logw: Array,
@@ -60,31 +62,75 @@ def jacobian_regression(dX: Array, Y_nb: Array, G_nb: Array, logw: Array,
     return f, J, log_sum
 
 
-def gaussian_jr(dX: Array, Y_nb: Array, G_nb: Array, bandwidth: float,
+def agreement_factor(ell: Array, logw: Array, G_nb: Array, tau: float, jacobian: bool
+                     ) -> tuple[Array, Array | None]:
+    """First-order agreement of the neighbours' Taylor predictions ``ell`` (n, k, dy).
+
+    The anchor of each query is the prediction with the largest kernel-weighted density
+    ``sum_j w_j exp(-|ell_i - ell_j|^2 / (2 tau^2))``; every neighbour is then weighted by
+    ``exp(-|ell_j - ell_anchor|^2 / (2 tau^2))``. Neighbours that are close in the input
+    but belong to another part of the manifold (a look-alike place, the other side of a
+    cut) predict far-away outputs and drop out, even when the kernel alone would give
+    them half the weight. Returns the log factor (n, k) and, if ``jacobian``, its
+    gradient (n, k, dx) with the anchor held fixed (piecewise constant):
+    ``-(G_j - G_anchor)^T (ell_j - ell_anchor) / tau^2``.
+    """
+    w, _ = softmax_weights(logw)
+    d2 = ((ell[:, :, None, :] - ell[:, None, :, :]) ** 2).sum(axis=3)  # (n, k, k)
+    anchor = np.argmax(np.einsum("nij,nj->ni", np.exp(-0.5 * d2 / tau ** 2), w), axis=1)
+    rows = np.arange(len(ell))
+    diff = ell - ell[rows, anchor][:, None, :]
+    log_a = -0.5 * (diff ** 2).sum(axis=2) / tau ** 2
+    grad = None
+    if jacobian:
+        dG = G_nb - G_nb[rows, anchor][:, None]
+        grad = -np.einsum("nkab,nka->nkb", dG, diff) / tau ** 2
+    return log_a, grad
+
+
+def gaussian_jr(dX: Array, Y_nb: Array, G_nb: Array, bandwidth: float | Array,
                 mask: NDArray[np.bool_] | None = None, jacobian: bool = False,
-                log_factor: Array | None = None) -> tuple[Array, Array | None, Array]:
+                log_factor: Array | None = None, agreement: float | None = None
+                ) -> tuple[Array, Array | None, Array]:
     """:func:`jacobian_regression` with the Gaussian kernel ``exp(-|dx|^2 / (2 sigma^2))``,
     optionally times a factor ``exp(log_factor)`` (n, k) treated as locally constant
-    (not differentiated)."""
-    logw = -0.5 * (dX ** 2).sum(axis=2) / bandwidth ** 2
+    (not differentiated).
+
+    ``bandwidth`` is one number, or an array (n, k) of per-neighbour bandwidths
+    ``sigma_j`` (the sample-point adaptive kernel: each training point carries its
+    own bandwidth, so the derivative stays ``-dx / sigma_j^2``). ``agreement`` (tau,
+    output units): multiply by :func:`agreement_factor` (robust to neighbours from
+    another part of the manifold); its derivative is included."""
+    bw = np.asarray(bandwidth, dtype=np.float64)
+    logw = -0.5 * (dX ** 2).sum(axis=2) / bw ** 2
     if log_factor is not None:
         logw = logw + log_factor
     if mask is not None:
         logw = np.where(mask, logw, -np.inf)
-    grad = -dX / bandwidth ** 2 if jacobian else None
+    grad = (-dX / (bw[..., None] if bw.ndim else bw) ** 2) if jacobian else None
+    if agreement is not None:
+        ell = Y_nb + np.einsum("nkab,nkb->nka", G_nb, dX)
+        log_a, grad_a = agreement_factor(ell, logw, G_nb, agreement, jacobian)
+        logw = logw + log_a
+        if grad is not None:
+            grad = grad + grad_a
     return jacobian_regression(dX, Y_nb, G_nb, logw, grad)
 
 
 def loo_bandwidth(dX: Array, Y_nb: Array, G_nb: Array, Y: Array, grid: Array,
-                  mask: NDArray[np.bool_] | None = None, log_factor: Array | None = None
+                  mask: NDArray[np.bool_] | None = None, log_factor: Array | None = None,
+                  radius: Array | None = None, agreement: float | None = None
                   ) -> tuple[float, Array]:
     """Leave-one-out choice of the Gaussian JR bandwidth.
 
     ``dX``, ``Y_nb``, ``G_nb`` describe the neighbourhoods of the *training*
     points themselves with the point excluded; ``Y`` (n, dy) are the targets.
-    Returns the best bandwidth and the LOO mean squared errors over ``grid``.
+    With ``radius`` (n, k) (the neighbours' own radii), candidate ``s`` means the
+    per-neighbour bandwidths ``s * radius`` (adaptive kernel).
+    Returns the best bandwidth (or factor) and the LOO mean squared errors over ``grid``.
     """
-    mse = np.array([((gaussian_jr(dX, Y_nb, G_nb, s, mask, log_factor=log_factor)[0] - Y) ** 2
+    mse = np.array([((gaussian_jr(dX, Y_nb, G_nb, s if radius is None else s * radius, mask,
+                                  log_factor=log_factor, agreement=agreement)[0] - Y) ** 2
                       ).sum(axis=1).mean() for s in grid])
     return float(grid[int(np.argmin(mse))]), mse
 

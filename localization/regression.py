@@ -7,8 +7,11 @@ composed with the recovery map: ``psi*(w) = g_v(r*(w))``, ``Phi*(theta) = g_u(R*
 A periodic pose column (yaw) enters Z as a (cos, sin) pair of radius
 ``theta_scale`` (so Z-space neighbourhoods see the true geometry), and the GSE
 graph is cut open at yaw = +-pi: a closed loop cannot be embedded by the
-least-squares step of spec 2.5 (spec section 9). Every kernel average keeps only
-the neighbours on the nearest neighbour's side of the cut.
+least-squares step of spec 2.5 (spec section 9). The same holds for a closed loop
+traced by the positions (a robot driving around a block, as in the paper's
+experiment): ``loop_cut="auto"`` detects it (:func:`~localization._graph.loop_coordinate`)
+and cuts it at one place. Every kernel average keeps only the neighbours on the
+nearest neighbour's side of every cut.
 """
 
 from __future__ import annotations
@@ -20,15 +23,23 @@ from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from ._graph import Array, brute_knn, check_2d, knn_graph, local_pca, same_side
+from ._graph import (
+    Array,
+    brute_knn,
+    check_2d,
+    cuts_keep_connected,
+    knn_graph,
+    local_pca,
+    loop_coordinate,
+    same_side,
+)
 from ._io import load_regressor, save_regressor
+from ._pose import PoseBlockMixin, wrap_angle
 from .gse import GrassmannStiefelEigenmaps
-from .jacobian_regression import BANDWIDTH_GRID, gaussian_jr, loo_bandwidth
+from .jacobian_regression import AGREEMENT_GRID, BANDWIDTH_GRID, gaussian_jr, loo_bandwidth
+from .model_selection import select_n_neighbors
 
-
-def wrap_angle(a: Array) -> Array:
-    """Wrap angles to (-pi, pi]."""
-    return np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), 2.0 * np.pi)
+__all__ = ["GSERegressor", "pinv_blocks", "rrmse", "select_n_neighbors", "wrap_angle"]
 
 
 def rrmse(pred: Array, true: Array, periodic: tuple[int, ...] = ()) -> float:
@@ -48,7 +59,7 @@ def pinv_blocks(H: Array, ridge: float = 0.0) -> Array:
     return np.linalg.solve(HtH, np.swapaxes(H, 1, 2))
 
 
-class GSERegressor(BaseEstimator):
+class GSERegressor(PoseBlockMixin, BaseEstimator):
     """GSE regression between features w (n, m) and poses theta (n, d).
 
     Parameters
@@ -72,7 +83,8 @@ class GSERegressor(BaseEstimator):
         Tikhonov term for ``G_v^{-1}``.
     bandwidth_grid : tuple of float
         Relative grid for the leave-one-out JR bandwidths.
-    out_of_domain : {"raise", "nan"}, default="raise"
+    out_of_domain : {"raise", "nan", "ignore"}, default="raise"
+        Queries whose kernel sum is negligible: raise, NaN, or the estimate anyway.
     random_state : int, default=0
     theta_scale_factor : float, default=2.0
         With theta_scale="auto": lambda_c = factor x median |dw/dtheta_c| (pose columns
@@ -83,6 +95,26 @@ class GSERegressor(BaseEstimator):
         Multiply K_W by the Binet-Cauchy factor between the local PCA tangent of the
         w-sample at the query and Span(G_u) at the sample (spec 3.2). The factor is not
         differentiated: embed_jacobian then ignores its (small) derivative.
+    loop_cut : {"auto", "none"}, default="auto"
+        "auto": if the linear (position) columns of Theta trace a closed loop, cut it
+        open at one place (angle in ``loop_angle_``), like the yaw cut; unless the
+        yaw cut already opens it (a heading that turns once along the loop: the pose
+        graph would fall apart with both cuts). Needed when
+        ``n_components`` is smaller than the loop's embedding needs (a closed route
+        with n_components=1).
+    adaptive_bandwidth : bool, default=False
+        Sample-point adaptive kernels of r* and R*: training point j gets the bandwidth
+        ``bandwidth_w_ x w_radius_[j]`` (its distance to its jr_neighbors-th
+        feature-space neighbour; ``bandwidth_theta_ x theta_radius_[j]`` in pose
+        space), so sparsely sampled stretches (a robot turning: images change fast;
+        gaps along a route) keep kernel support. The bandwidths are then LOO factors.
+    agreement : None, "auto" or float, default=None
+        Robust r*: weight each neighbour also by the agreement of its first-order
+        prediction ``y_j + G_r (w - w_j)`` with the densest group of predictions
+        (:func:`~localization.jacobian_regression.agreement_factor`), with scale
+        ``tau = agreement x`` the median y-distance to the jr_neighbors-th neighbour.
+        Look-alike places among the feature-space neighbours then drop out. "auto":
+        choose the factor (or none) with the bandwidth by leave-one-out.
 
     Attributes
     ----------
@@ -90,9 +122,19 @@ class GSERegressor(BaseEstimator):
     embedding_ : ndarray of shape (n, q)
     theta_scale_ : ndarray of shape (d,)
     bandwidth_w_, bandwidth_theta_ : float
-        LOO bandwidths of r* (standardised w units) and R* (scaled theta units).
+        LOO bandwidths of r* (standardised w units, or a factor of ``w_radius_`` with
+        adaptive_bandwidth) and R* (scaled theta units).
+    agreement_ : float or None
+        tau of the agreement factor of r* (None: off).
+    w_radius_, theta_radius_ : ndarray of shape (n,)
+        Distance of each sample to its jr_neighbors-th neighbour in feature space
+        (standardised) and in pose space (scaled).
     pose_condition_ : ndarray of shape (n,)
         cond(G_v) at the samples.
+    loop_angle_ : ndarray of shape (n,) or None
+        Angle along the detected position loop (None: no loop, or loop_cut="none").
+    cut_ : ndarray of shape (n, c) or None
+        All cut coordinates (periodic columns, then the loop angle).
     """
 
     def __init__(self, n_components: int | None = None, n_neighbors: int = 20,
@@ -102,7 +144,8 @@ class GSERegressor(BaseEstimator):
                  bandwidth_grid: tuple[float, ...] = BANDWIDTH_GRID,
                  out_of_domain: str = "raise", random_state: int = 0,
                  theta_scale_factor: float = 2.0, jr_neighbors: int | None = None,
-                 kernel_grassmann: bool = False) -> None:
+                 kernel_grassmann: bool = False, loop_cut: str = "auto",
+                 adaptive_bandwidth: bool = False, agreement: float | str | None = None) -> None:
         self.n_components = n_components
         self.n_neighbors = n_neighbors
         self.periodic = periodic
@@ -117,71 +160,9 @@ class GSERegressor(BaseEstimator):
         self.theta_scale_factor = theta_scale_factor
         self.jr_neighbors = jr_neighbors
         self.kernel_grassmann = kernel_grassmann
-
-    # ----------------------------------------------------------------- geometry
-    def _periodic(self, d: int) -> tuple[int, ...]:
-        per = tuple(sorted({int(c) for c in self.periodic}))
-        if any(c < 0 or c >= d for c in per):
-            raise ValueError(f"periodic={self.periodic} has columns outside Theta's {d} columns")
-        if len(per) > 1:
-            raise ValueError(f"at most one periodic column is supported, got {per}")
-        return per
-
-    def _lift(self, theta: Array) -> Array:
-        """Pose block of Z: scaled linear columns, (cos, sin) x scale for the angle."""
-        cols = []
-        for c in range(theta.shape[1]):
-            lam = self.theta_scale_[c]
-            if c in self._per:
-                cols += [lam * np.cos(theta[:, c]), lam * np.sin(theta[:, c])]
-            else:
-                cols.append(lam * (theta[:, c] - self.theta_center_[c]))
-        return np.column_stack(cols)
-
-    def _unlift(self, zv: Array) -> Array:
-        out, j = [], 0
-        for c in range(len(self.theta_scale_)):
-            if c in self._per:
-                out.append(np.arctan2(zv[:, j + 1], zv[:, j]))
-                j += 2
-            else:
-                out.append(zv[:, j] / self.theta_scale_[c] + self.theta_center_[c])
-                j += 1
-        return np.column_stack(out)
-
-    def _pose_diff(self, theta: Array, theta_nb: Array) -> Array:
-        """Scaled pose differences (n, k, d), angle differences wrapped."""
-        dt = theta[:, None, :] - theta_nb
-        for c in self._per:
-            dt[..., c] = wrap_angle(dt[..., c])
-        return dt * self.theta_scale_
-
-    def _dlift(self, theta: Array) -> Array:
-        """d(pose block)/d(scaled theta), shape (n, p_v, d)."""
-        n, d = theta.shape
-        E = np.zeros((n, d + len(self._per), d))
-        j = 0
-        for c in range(d):
-            if c in self._per:
-                E[:, j, c], E[:, j + 1, c] = -np.sin(theta[:, c]), np.cos(theta[:, c])
-                j += 2
-            else:
-                E[:, j, c] = 1.0
-                j += 1
-        return E
-
-    def _auto_scale(self, Ws: Array, Theta: Array, ind_w: Array) -> Array:
-        """Per-column feature sensitivity |dw/dtheta_c| (median over samples) from local
-        least squares of standardised w on theta over *feature-space* neighbours
-        ``ind_w`` (pose-space neighbours would let poses bridge separate feature clusters)."""
-        d = Theta.shape[1]
-        self.theta_scale_ = np.ones(d)
-        dT = self._pose_diff(Theta, Theta[ind_w])
-        dW = Ws[:, None, :] - Ws[ind_w]
-        A = np.swapaxes(dT, 1, 2) @ dT
-        A += 1e-12 * np.trace(A, axis1=1, axis2=2)[:, None, None] * np.eye(d)
-        Jt = np.linalg.solve(A, np.swapaxes(dT, 1, 2) @ dW)  # (n, d, m) = J^T
-        return np.median(np.linalg.norm(Jt, axis=2), axis=0)
+        self.loop_cut = loop_cut
+        self.adaptive_bandwidth = adaptive_bandwidth
+        self.agreement = agreement
 
     # --------------------------------------------------------------------- fit
     def fit(self, W: Array, Theta: Array) -> GSERegressor:
@@ -191,6 +172,12 @@ class GSERegressor(BaseEstimator):
             raise ValueError(f"W has {W.shape[0]} rows but Theta has {Theta.shape[0]}")
         (n, m), d = W.shape, Theta.shape[1]
         self._per = self._periodic(d)
+        if self.loop_cut not in ("auto", "none"):
+            raise ValueError(f"loop_cut must be 'auto' or 'none', got {self.loop_cut!r}")
+        if not (self.agreement in (None, "auto") or (
+                isinstance(self.agreement, (int, float)) and self.agreement > 0)):
+            raise ValueError(f"agreement must be None, 'auto' or a positive number, got "
+                             f"{self.agreement!r}")
         q = d if self.n_components is None else self.n_components
         k = self.n_neighbors
         if n <= k + 1:
@@ -216,11 +203,20 @@ class GSERegressor(BaseEstimator):
                              "theta_scale='auto' a zero means the features do not vary with "
                              "that Theta column (drop it or pass theta_scale explicitly)")
         self.theta_ = Theta
+        lin = [c for c in range(d) if c not in self._per]
+        self.loop_angle_ = (loop_coordinate(Theta[:, lin], k, seed=self.random_state)
+                            if self.loop_cut == "auto" and lin else None)
+        if self.loop_angle_ is not None and self._per and not cuts_keep_connected(
+                self._lift(Theta), np.column_stack([Theta[:, self._per], self.loop_angle_]), k):
+            self.loop_angle_ = None  # the heading wraps once along the loop: its cut opens it
+        cuts = [Theta[:, c] for c in self._per] + (
+            [self.loop_angle_] if self.loop_angle_ is not None else [])
+        self.cut_ = np.column_stack(cuts) if cuts else None
         Z = np.column_stack([Ws, self._lift(Theta)])
         self.gse_ = GrassmannStiefelEigenmaps(
             q, n_neighbors=k, bandwidth=self.bandwidth, grassmann_kernel=self.grassmann_kernel,
             out_of_domain=self.out_of_domain, random_state=self.random_state)
-        self.gse_.fit(Z, cut=Theta[:, self._per[0]] if self._per else None)
+        self.gse_.fit(Z, cut=self.cut_)
         self.gse_.select_recovery_bandwidth()
         H = self.gse_.frames_
         self.Gr_ = pinv_blocks(H[:, :m, :])
@@ -235,26 +231,45 @@ class GSERegressor(BaseEstimator):
         s = np.linalg.svd(Hv, compute_uv=False)
         self.pose_condition_ = s[:, 0] / np.maximum(s[:, -1], np.finfo(float).tiny)
         self._setup()
-        # leave-one-out bandwidths of the two Jacobian regressions
+        self._select_bandwidths(Ws, Theta, dist_w, ind_w)
+        return self
+
+    def _select_bandwidths(self, Ws: Array, Theta: Array, dist_w: Array, ind_w: Array) -> None:
+        """Leave-one-out bandwidths (and agreement scale) of the two Jacobian regressions
+        r* (features) and R* (poses)."""
+        n, k = len(Ws), self.n_neighbors
         y = self.embedding_
         self.jr_neighbors_ = kj = min(self.jr_neighbors or k, n - 2)
         if kj != k:
             d2, ind_w = brute_knn(Ws, self._ws_sqn, Ws, kj + 1)
             ind_w, dist_w = ind_w[:, 1:], np.sqrt(d2[:, 1:])
-        mask = same_side(self.theta_[ind_w][..., self._per[0]]) if self._per else None
+        mask = self._mask(ind_w)
         grid = np.asarray(self.bandwidth_grid)
         self._pca_bw = 0.5 * float(np.median(dist_w[:, -1]))
-        self.bandwidth_w_, _ = loo_bandwidth(
-            Ws[:, None, :] - Ws[ind_w], y[ind_w], self.Gr_[ind_w], y,
-            grid * np.median(dist_w[:, -1]), mask, self._w_factor(Ws, ind_w))
+        self.w_radius_ = dist_w[:, -1].copy()
+        y_radius = float(np.median(cKDTree(y).query(y, k=kj + 1)[0][:, -1]))
+        taus = {"auto": (None, *AGREEMENT_GRID), None: (None,)}.get(self.agreement,  # type: ignore[call-overload]
+                                                                    (self.agreement,))
+        best = (np.inf, 0.0, None)
+        for a in taus:
+            tau = None if a is None else float(a) * y_radius
+            bw, mse = loo_bandwidth(
+                Ws[:, None, :] - Ws[ind_w], y[ind_w], self.Gr_[ind_w], y,
+                grid if self.adaptive_bandwidth else grid * np.median(dist_w[:, -1]), mask,
+                self._w_factor(Ws, ind_w), self.w_radius_[ind_w] if self.adaptive_bandwidth
+                else None, tau)
+            best = min(best, (float(mse.min()), bw, tau), key=lambda t: t[0])
+        _, self.bandwidth_w_, self.agreement_ = best
         _, ind_t = self._zv_tree.query(self._zv, k=kj + 1)
         ind_t = ind_t[:, 1:]
         dX = self._pose_diff(Theta, Theta[ind_t])
-        mask = same_side(self.theta_[ind_t][..., self._per[0]]) if self._per else None
+        mask = self._mask(ind_t)
+        self.theta_radius_ = np.linalg.norm(dX[:, -1], axis=1)
+        ad = self.adaptive_bandwidth
         self.bandwidth_theta_, _ = loo_bandwidth(
             dX, y[ind_t], self.GR_[ind_t], y,
-            grid * np.median(np.linalg.norm(dX[:, -1], axis=1)), mask)
-        return self
+            grid if ad else grid * np.median(self.theta_radius_), mask, None,
+            self.theta_radius_[ind_t] if ad else None)
 
     def _setup(self) -> None:
         """Derived per-sample query structures (after fit or load)."""
@@ -273,7 +288,7 @@ class GSERegressor(BaseEstimator):
 
     def _flag(self, log_sum: Array, what: str, *outs: Array) -> None:
         bad = log_sum < np.log(self.gse_.min_kernel_sum)
-        if bad.any():
+        if bad.any() and self.out_of_domain != "ignore":
             if self.out_of_domain == "raise":
                 raise ValueError(f"{bad.sum()} {what} row(s) are outside the training domain "
                                  f"(kernel sum < {self.gse_.min_kernel_sum:g}), first row "
@@ -281,6 +296,10 @@ class GSERegressor(BaseEstimator):
             for o in outs:
                 if o is not None:
                     o[bad] = np.nan
+
+    def _mask(self, ind: Array) -> Array | None:
+        """Neighbours (n, k) on the nearest neighbour's side of every cut, or None."""
+        return None if self.cut_ is None else same_side(self.cut_[ind])
 
     def _w_factor(self, Ws: Array, ind: Array) -> Array | None:
         """log Binet-Cauchy factor of K_W (n, k), or None when kernel_grassmann is off."""
@@ -300,10 +319,11 @@ class GSERegressor(BaseEstimator):
             ind = np.asarray(self._ws_tree.query(Ws, k=self.jr_neighbors_)[1]).reshape(len(Ws), -1)
         else:
             ind = brute_knn(self._ws, self._ws_sqn, Ws, self.jr_neighbors_)[1]
-        mask = same_side(self.theta_[ind][..., self._per[0]]) if self._per else None
+        mask = self._mask(ind)
+        bw = self.bandwidth_w_ * self.w_radius_[ind] if self.adaptive_bandwidth else self.bandwidth_w_
         r, J, log_sum = gaussian_jr(Ws[:, None, :] - self._ws[ind], self.embedding_[ind],
-                                    self.Gr_[ind], self.bandwidth_w_, mask, jacobian,
-                                    self._w_factor(Ws, ind))
+                                    self.Gr_[ind], bw, mask, jacobian,
+                                    self._w_factor(Ws, ind), self.agreement_)
         if J is not None:
             J /= self.w_scale_
         self._flag(log_sum, "W", r, J)
@@ -315,9 +335,11 @@ class GSERegressor(BaseEstimator):
             Theta[:, c] = wrap_angle(Theta[:, c])
         _, ind = self._zv_tree.query(self._lift(Theta), k=self.jr_neighbors_)
         ind = np.asarray(ind).reshape(len(Theta), -1)
-        mask = same_side(self.theta_[ind][..., self._per[0]]) if self._per else None
+        mask = self._mask(ind)
+        bw = (self.bandwidth_theta_ * self.theta_radius_[ind] if self.adaptive_bandwidth
+              else self.bandwidth_theta_)
         R, J, log_sum = gaussian_jr(self._pose_diff(Theta, self.theta_[ind]), self.embedding_[ind],
-                                    self.GR_[ind], self.bandwidth_theta_, mask, jacobian)
+                                    self.GR_[ind], bw, mask, jacobian)
         if J is not None:
             J *= self.theta_scale_
         self._flag(log_sum, "Theta", R, J)
@@ -368,6 +390,24 @@ class GSERegressor(BaseEstimator):
         gu, _ = self._recover(R, slice(0, len(self.w_mean_)))
         return gu * self.w_scale_ + self.w_mean_
 
+    def reconstruct(self, W: Array) -> Array:
+        """Reduce-then-recover ``g_u(r*(w))``: features (n, m) rebuilt from their
+        q-dimensional representation (the paper's Fig. 2), original units."""
+        r, _ = self._r_star(W, False)
+        gu, _, _ = self.gse_._recover(r, slice(0, len(self.w_mean_)))
+        return gu * self.w_scale_ + self.w_mean_
+
+    def feature_tangents(self, W: Array) -> Array:
+        """Tangent vectors of the feature manifold at ``g_u(r*(w))``: the feature block
+        ``G_u`` of the recovery Jacobian field (spec 2.7), shape (n, m, q), original units
+        per unit of representation (the paper's Fig. 3)."""
+        r, _ = self._r_star(W, False)
+        out = np.full((len(r), len(self.w_mean_), r.shape[1]), np.nan)
+        ok = np.isfinite(r).all(axis=1)
+        if ok.any():
+            out[ok] = self.gse_.recovery_jacobian(r[ok])[:, :len(self.w_mean_), :]
+        return out * self.w_scale_
+
     def features_jacobian(self, Theta: Array) -> Array:
         """Exact dPhi*/dtheta (n, m, d) in original units (angles in radians): EKF's H."""
         R, JR = self._R_star(Theta, True)
@@ -385,28 +425,3 @@ class GSERegressor(BaseEstimator):
         """Load a model written by :meth:`save`; ValueError if corrupt or incomplete."""
         return load_regressor(cls, path)
 
-
-def select_n_neighbors(W: Array, Theta: Array, grid: tuple[int, ...] = (10, 15, 20, 30),
-                       cv: int = 3, random_state: int = 0, **params: object
-                       ) -> tuple[int, dict[int, float]]:
-    """Choose ``n_neighbors`` by K-fold cross-validation of psi* (pose RRMSE).
-
-    Returns the best k and the mean validation RRMSE for every k in ``grid``
-    (``inf`` where a fit failed, e.g. a disconnected graph for small k).
-    """
-    W, Theta = check_2d(W, "W"), check_2d(Theta, "Theta")
-    folds = np.array_split(np.random.default_rng(random_state).permutation(len(W)), cv)
-    periodic = tuple(params.get("periodic", ()))  # type: ignore[arg-type]
-    scores: dict[int, float] = {}
-    for k in grid:
-        errs = []
-        for f in folds:
-            tr = np.setdiff1d(np.arange(len(W)), f)
-            try:
-                model = GSERegressor(n_neighbors=k, **params).fit(W[tr], Theta[tr])  # type: ignore[arg-type]
-                pred = GSERegressor.predict(model, W[f])
-                errs.append(rrmse(pred, Theta[f], periodic))
-            except ValueError:
-                errs.append(np.inf)
-        scores[k] = float(np.mean(errs))
-    return min(scores, key=scores.get), scores  # type: ignore[arg-type]

@@ -149,3 +149,35 @@ def regression_manifold(n: int, dim_theta: int = 2, m: int = 30, seed: int = 0,
         periodic = (2,)
     phi = FeatureMap(dim_theta, m=m, seed=map_seed, periodic=periodic)
     return phi(theta), theta, phi
+
+
+def route_curve(s: Array) -> Array:
+    """A closed smooth route in [0, 1]^2: positions (n, 2) at loop parameter s (one lap
+    per unit of s)."""
+    t = 2.0 * np.pi * np.asarray(s, dtype=np.float64)
+    return np.column_stack([0.5 + 0.4 * np.cos(t), 0.5 + 0.3 * np.sin(t) + 0.1 * np.sin(2 * t)])
+
+
+def route_manifold(n: int, m: int = 30, seed: int = 0, laps: float = 1.5,
+                   lateral: float = 0.003, map_seed: int = 1234
+                   ) -> tuple[Array, Array, Array, FeatureMap]:
+    """Samples along a closed route driven ``laps`` times, like the paper's vehicle data.
+
+    Positions theta (n, 2) at a uniform random loop parameter ``s`` in [0, laps),
+    plus Gaussian lateral noise (sd ``lateral``), features ``w = Phi(theta)`` of the
+    same :class:`FeatureMap` as :func:`regression_manifold` (dim_theta=2). The
+    sample is a closed 1-D curve: intrinsic dimension 1, one loop.
+
+    Returns
+    -------
+    W : ndarray of shape (n, m)
+    Theta : ndarray of shape (n, 2)
+    s : ndarray of shape (n,)
+        Loop parameter (fractional part = position along the loop).
+    phi : FeatureMap
+    """
+    rng = np.random.default_rng(seed)
+    s = np.sort(rng.uniform(0.0, laps, n))
+    theta = route_curve(s) + rng.normal(0.0, lateral, (n, 2))
+    phi = FeatureMap(2, m=m, seed=map_seed)
+    return phi(theta), theta, s, phi

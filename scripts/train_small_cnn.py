@@ -27,6 +27,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+import torch
+
 from localization.small_cnn import save_small_cnn, train_small_cnn
 
 
@@ -148,7 +150,10 @@ def main(argv: list[str] | None = None) -> Path:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     save_small_cnn(model, out)
-    meta = {"args": dataclasses.asdict(args), "seeds": seeds, "n_images": len(images),
+    command = "python scripts/train_small_cnn.py " + " ".join(
+        sys.argv[1:] if argv is None else argv)
+    meta = {"command": command.strip(), "args": dataclasses.asdict(args), "seeds": seeds,
+            "n_images": len(images), "torch": torch.__version__,
             "loss_history": model.loss_history, "collect_s": t_collect, "train_s": t_train}
     out.with_suffix(out.suffix + ".json").write_text(json.dumps(meta, indent=2))
     print(f"saved {out}: {len(images)} images, loss {model.loss_history[0]:.4f} -> "

@@ -240,3 +240,19 @@ def test_pose_contrastive_training(images):
     ext = SmallCNNFeatures(4, objective="pose_contrastive", epochs=1, embedding_dim=8, width=8,
                            batch_size=16, progress=False).fit(images, poses)
     assert ext.transform(images[:2]).shape == (2, 4)
+
+
+def test_pixel_pca_mask_uses_only_the_masked_pixels_and_round_trips():
+    rng = np.random.default_rng(0)
+    images = rng.integers(0, 256, (40, 16, 16, 3), dtype=np.uint8)
+    mask = np.zeros((16, 16), bool)
+    mask[:6] = True
+    f = PixelPCA(n_components=5, mask=mask).fit(images)
+    other = images.copy()
+    other[:, 6:] = 0  # pixels outside the mask do not matter
+    assert np.array_equal(f.transform(images), f.transform(other))
+    assert f.pca_.n_features_in_ == 6 * 16 * 3
+    g = features_from_state(f.get_state())
+    assert np.array_equal(g.transform(images), f.transform(images))
+    with pytest.raises(ValueError, match="mask"):
+        PixelPCA(mask=np.ones((8, 8), bool)).fit(images)

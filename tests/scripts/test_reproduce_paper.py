@@ -1,0 +1,46 @@
+"""The paper's experiment end to end, small: ``scripts/reproduce_paper.py --quick``."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("paper")
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+           "MKL_NUM_THREADS": "1"}  # the other xdist worker has the second core
+    subprocess.run([sys.executable, str(ROOT / "scripts" / "reproduce_paper.py"), "--quick",
+                    "--out", str(out), "--num-threads", "1"], check=True, cwd=ROOT,
+                   capture_output=True, text=True, timeout=900, env=env)
+    return out
+
+
+def test_quick_run_writes_the_tables_and_figures(quick_run: Path) -> None:
+    tables = (quick_run / "tables.md").read_text()
+    for heading in ("Table 1", "Table 2", "Random 3-DoF", "Figs. 2-3"):
+        assert heading in tables
+    for cam in ("perspective", "fisheye", "catadioptric"):
+        assert cam in tables
+    assert (quick_run / "reconstruction_tangent.png").stat().st_size > 10_000
+    report = json.loads((quick_run / "results.json").read_text())
+    assert set(report["table1"]) == {"perspective", "fisheye", "catadioptric"}
+    # 3 cameras x 2 data sets x 2 feature extractors x 3 methods
+    assert len(report["table2"]) == 36
+
+
+def test_quick_run_gse_ahead_of_knr_along_the_route(quick_run: Path) -> None:
+    report = json.loads((quick_run / "results.json").read_text())
+    rows = {(r["camera"], r["features"], r["method"]): r["rrmse"]
+            for r in report["table2"] if r["dataset"] == "route"}
+    for cam in ("perspective", "fisheye", "catadioptric"):
+        for feat in ("pixel_pca", "small_cnn"):
+            assert rows[cam, feat, "gse"] < rows[cam, feat, "knr"], (cam, feat)
