@@ -19,7 +19,8 @@ For "grid" and "random" the robot is teleported (``mj_forward``) and the camera
 rendered, which is fast.
 
 :func:`drive_route` records a drive around the route with its controls (for the process
-noise and the measurement noise of a filter).
+noise and the measurement noise of a filter), :func:`drive_streets` one along a random tour
+of all the streets.
 """
 
 from __future__ import annotations
@@ -35,12 +36,12 @@ import numpy as np
 from numpy.typing import NDArray
 from tqdm.auto import tqdm
 
-from envs.lanes import lane_poses
+from envs.lanes import lane_poses, street_tour
 from envs.motion_model import wrap_angle
 from envs.robot import HALF_TRACK, ROBOT_RADIUS, WHEEL_RADIUS
 
-__all__ = ["MODES", "PurePursuit", "collect_dataset", "drive_route", "grid_poses", "load_dataset",
-           "save_dataset"]
+__all__ = ["MODES", "PurePursuit", "collect_dataset", "drive_route", "drive_streets", "grid_poses",
+           "load_dataset", "save_dataset"]
 
 MODES = ("grid", "random", "route", "lanes")
 POSE_MARGIN = ROBOT_RADIUS + 0.1  # m of clearance to buildings for teleported poses
@@ -71,42 +72,51 @@ def grid_poses(city: Any, n: int, n_headings: int = 8, margin: float = POSE_MARG
 
 
 class PurePursuit:
-    """Pure-pursuit steering around a closed polyline, like a car following a lane.
+    """Pure-pursuit steering along a polyline, like a car following a lane.
 
     Parameters
     ----------
-    waypoints : (p, 2) closed loop (the last point connects back to the first).
+    waypoints : (p, 2) polyline; a closed loop (the last point connects back to the first)
+        unless ``closed=False``.
     lookahead : float — distance (m) to the carrot point along the path.
     speed : float — forward speed command (m/s).
     w_max : float — bound on the angular velocity command (rad/s).
     step : float — path resampling step (m).
+    closed : bool — the path loops; an open path ends at its last waypoint (the carrot
+        stays there).
     """
 
     def __init__(self, waypoints: NDArray[np.float64], lookahead: float = 0.8, speed: float = 0.6,
-                 w_max: float = 1.0, step: float = 0.05) -> None:
-        loop = np.vstack([waypoints, waypoints[:1]])
+                 w_max: float = 1.0, step: float = 0.05, closed: bool = True) -> None:
+        waypoints = np.asarray(waypoints, dtype=np.float64)
+        loop = np.vstack([waypoints, waypoints[:1]]) if closed else waypoints
         pts = [a + (b - a) * t for a, b in pairwise(loop)
                for t in np.arange(0, 1, step / max(np.hypot(*(b - a)), 1e-9))]
-        self.path = np.array(pts)
+        self.path = np.array(pts if closed else [*pts, loop[-1]])
         self.lookahead, self.speed, self.w_max, self.step = lookahead, speed, w_max, step
+        self.closed = closed
         self.index = 0
+
+    def _at(self, index: NDArray[np.int_] | int) -> NDArray[np.int_] | int:
+        n = len(self.path)
+        return np.mod(index, n) if self.closed else np.minimum(index, n - 1)
 
     def start_pose(self, index: int = 0) -> NDArray[np.float64]:
         """Path point ``index`` (default the first), heading along the path, (3,); the
         controller continues from there."""
-        n = len(self.path)
-        index = int(index) % n
+        index = int(self._at(int(index)))
         self.index = index
-        d = self.path[(index + 1) % n] - self.path[index]
+        ahead = int(self._at(index + 1))
+        d = self.path[ahead] - self.path[index] if ahead != index else \
+            self.path[index] - self.path[index - 1]  # the end of an open path
         return np.array([*self.path[index], np.arctan2(d[1], d[0])])
 
     def __call__(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
         """Return the control U = [v, w] for the current pose."""
-        n = len(self.path)
-        window = (self.index + np.arange(40)) % n  # search only ahead: the loop crosses itself
+        window = self._at(self.index + np.arange(40))  # search only ahead: the loop crosses itself
         d = np.hypot(*(self.path[window] - pose[:2]).T)
         self.index = int(window[np.argmin(d)])
-        carrot = self.path[(self.index + int(self.lookahead / self.step)) % n]
+        carrot = self.path[self._at(self.index + int(self.lookahead / self.step))]
         alpha = wrap_angle(np.arctan2(carrot[1] - pose[1], carrot[0] - pose[0]) - pose[2])
         w = np.clip(2.0 * self.speed * np.sin(alpha) / self.lookahead, -self.w_max, self.w_max)
         v = self.speed * max(0.3, np.cos(alpha))  # slow down in sharp turns
@@ -224,15 +234,42 @@ def drive_route(env: gym.Env, n: int, seed: int = 0, start: int = 0, progress: b
     poses : (n + 1, 3) float64 — true poses.
     controls : (n, 2) float64 — the commanded controls (controls[t] moves poses[t] to poses[t+1]).
     """
-    if int(n) != n or n < 1:
-        raise ValueError(f"n must be a positive integer, got {n}")
     base = env.unwrapped
     pilot = PurePursuit(base.city.route(), w_max=base.W_MAX)
-    obs, info = base.reset(seed=seed, options={"pose": pilot.start_pose(start)})
+    return _drive(env, pilot, pilot.start_pose(start), n, seed, progress, "drive route")
+
+
+def drive_streets(env: gym.Env, n: int, seed: int = 0, speed: float = CRUISE_SPEED,
+                  progress: bool = True,
+                  ) -> tuple[NDArray[np.uint8], NDArray[np.float64], NDArray[np.float64]]:
+    """Drive n steps along a random tour of the streets (:func:`envs.lanes.street_tour`: every
+    street both ways, every turn) with :class:`PurePursuit` on the true pose.
+
+    The tour (drawn from ``seed``) starts at an intersection, heading along its first street,
+    and is long enough for n steps at ``speed``. Arguments and returns as :func:`drive_route`.
+    """
+    _check_steps(n)
+    base = env.unwrapped
+    tour = street_tour(base.city, 1.5 * n * base.dt * speed + 10.0, np.random.default_rng(seed))
+    pilot = PurePursuit(tour, speed=speed, w_max=base.W_MAX, closed=False)
+    return _drive(env, pilot, pilot.start_pose(0), n, seed, progress, "drive streets")
+
+
+def _check_steps(n: int) -> None:
+    if int(n) != n or n < 1:
+        raise ValueError(f"n must be a positive integer, got {n}")
+
+
+def _drive(env: gym.Env, pilot: PurePursuit, start: NDArray[np.float64], n: int, seed: int,
+           progress: bool, desc: str,
+           ) -> tuple[NDArray[np.uint8], NDArray[np.float64], NDArray[np.float64]]:
+    _check_steps(n)
+    base = env.unwrapped
+    obs, info = base.reset(seed=seed, options={"pose": start})
     images = np.empty((n + 1, *base.image_size, 3), np.uint8)
     poses, controls = np.empty((n + 1, 3)), np.empty((n, 2))
     images[0], poses[0] = obs["image"], info["pose"]
-    for t in tqdm(range(n), desc="drive route", disable=not progress, leave=False):
+    for t in tqdm(range(n), desc=desc, disable=not progress, leave=False):
         controls[t] = pilot(poses[t])
         obs, _, _, _, info = base.step(controls[t])
         images[t + 1], poses[t + 1] = obs["image"], info["pose"]

@@ -8,7 +8,8 @@ turns of the city's loop ``city.route()`` in its driving direction.
 
 :func:`lane_poses` samples poses around the lanes: a point on a lane (chosen by length,
 turns weighted up, see below), shifted sideways by up to ``lateral`` metres and turned by
-up to ``heading`` radians, kept if it is ``margin`` away from buildings. Images change much
+up to ``heading`` radians, kept if it is ``margin`` away from buildings. :func:`street_tour`
+draws a random drive over the street graph (intersections to visit, no U-turns). Images change much
 faster with heading than with position (at 64 px a 0.1 rad turn changes the image about as
 much as a 1 m drive), so a turn arc, which sweeps pi/2 of heading in ~1.3 m, is sampled as
 if it were ``sqrt(1 + (turn_weight / turn_radius)^2)`` times longer.
@@ -175,3 +176,33 @@ def lane_poses(city: Any, n: int, rng: np.random.Generator, lanes: str = "street
         raise RuntimeError(f"found only {len(poses)} free lane poses of {n} (margin {margin} m, "
                            f"lateral offset {lateral} m): streets too narrow for them")
     return np.array(poses), np.array(curvature)
+
+
+def street_tour(city: Any, length: float, rng: np.random.Generator) -> NDArray[np.float64]:
+    """A random drive over the street graph: intersections (p, 2) to visit in order.
+
+    It starts at a random intersection, goes to a random neighbour, then at every
+    intersection takes a random street other than the one it came from (no U-turns, like
+    the lanes), until the polyline is at least ``length`` metres long. Streets are driven
+    in both directions and every turn is possible, so a long tour covers the whole city.
+
+    Raises
+    ------
+    ValueError
+        For a non-positive length.
+    """
+    if not length > 0:
+        raise ValueError(f"length must be > 0, got {length}")
+    nodes, edges = city.street_graph()
+    neighbours: dict[int, list[int]] = {i: [] for i in range(len(nodes))}
+    for i, j in edges:
+        neighbours[i].append(j)
+        neighbours[j].append(i)
+    prev, node = -1, int(rng.integers(len(nodes)))
+    tour, total = [node], 0.0
+    while total < length:
+        options = [j for j in neighbours[node] if j != prev] or neighbours[node]
+        prev, node = node, options[int(rng.integers(len(options)))]
+        total += float(np.hypot(*(nodes[node] - nodes[prev])))
+        tour.append(node)
+    return np.asarray(nodes[tour], dtype=np.float64)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from envs import AppearanceNavEnv, collect_dataset, load_dataset, save_dataset
-from envs.datasets import drive_route, grid_poses
+from envs.datasets import PurePursuit, drive_route, drive_streets, grid_poses
 
 
 @pytest.fixture(scope="module")
@@ -112,3 +112,28 @@ def test_drive_route_records_controls(env):
     assert np.all(step < 0.1) and step[5:].mean() > 0.04
     again = drive_route(env, 50, seed=1, start=200, progress=False)
     assert all(np.array_equal(a, b) for a, b in zip((images, poses, controls), again))
+
+
+def test_drive_streets_follows_the_streets(env):
+    images, poses, controls = drive_streets(env, 300, seed=4, progress=False)
+    assert images.shape == (301, 32, 32, 3) and controls.shape == (300, 2)
+    assert env.city.free_mask(poses[:, :2], 0.2).all()
+    street = np.abs(poses[:, :2, None] - env.city.street_centers[None, None]).min(axis=2)
+    assert np.all(street.min(axis=1) < 0.4)  # on a lane
+    assert np.hypot(*np.diff(poses[:, :2], axis=0).T).sum() > 0.8 * 300 * env.dt * 0.6
+    again = drive_streets(env, 300, seed=4, progress=False)
+    assert all(np.array_equal(a, b) for a, b in zip((images, poses, controls), again))
+    with pytest.raises(ValueError, match="positive"):
+        drive_streets(env, 0, progress=False)
+
+
+def test_open_pure_pursuit_stops_at_the_end():
+    pilot = PurePursuit(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]]), closed=False)
+    assert pilot.path[-1] == pytest.approx([2.0, 2.0])
+    assert pilot.start_pose(10_000) == pytest.approx([2.0, 2.0, np.pi / 2])  # the last point
+    pose = pilot.start_pose(0)
+    assert pose == pytest.approx([0.0, 0.0, 0.0])
+    for _ in range(200):  # drive it with a perfect unicycle
+        v, w = pilot(pose)
+        pose = pose + 0.1 * np.array([v * np.cos(pose[2]), v * np.sin(pose[2]), w])
+    assert np.hypot(pose[0] - 2.0, pose[1] - 2.0) < 0.5  # it never runs on past the end

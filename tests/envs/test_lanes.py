@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from envs.lanes import lane_poses, street_lanes
+from envs.lanes import lane_poses, street_lanes, street_tour
 from envs.motion_model import wrap_angle
 from envs.scene import generate_city
 
@@ -62,3 +62,20 @@ def test_bad_lane_options(city):
         lane_poses(city, 10, np.random.default_rng(0), lateral=-1.0)
     with pytest.raises(RuntimeError, match="free"):
         lane_poses(city, 10, np.random.default_rng(0), margin=5.0)
+
+
+def test_street_tour_drives_the_graph_without_u_turns(city):
+    nodes, edges = city.street_graph()
+    linked = {tuple(sorted(e)) for e in edges}
+    tour = street_tour(city, 200.0, np.random.default_rng(3))
+    index = [int(np.flatnonzero(np.all(nodes == p, axis=1))[0]) for p in tour]
+    assert all(tuple(sorted(ab)) in linked for ab in zip(index, index[1:]))  # along streets
+    assert all(a != c for a, c in zip(index, index[2:]))  # never straight back
+    length = np.hypot(*np.diff(tour, axis=0).T).sum()
+    assert 200.0 <= length < 200.0 + city.size
+    driven = {tuple(ab) for ab in zip(index, index[1:])}
+    assert any((b, a) in driven for a, b in driven)  # streets are driven both ways
+    assert len({tuple(sorted(ab)) for ab in driven}) > len(edges) / 2
+    assert np.array_equal(tour, street_tour(city, 200.0, np.random.default_rng(3)))
+    with pytest.raises(ValueError, match="length"):
+        street_tour(city, 0.0, np.random.default_rng(0))
