@@ -28,7 +28,8 @@ _PROBE = (
 def can_render(backend: str) -> bool:
     """Return whether MuJoCo renders offscreen with ``backend`` (in a subprocess)."""
     env = dict(os.environ, MUJOCO_GL=backend, PYOPENGL_PLATFORM=backend)
-    proc = subprocess.run([sys.executable, "-c", _PROBE], env=env, capture_output=True)
+    proc = subprocess.run([sys.executable, "-c", _PROBE], env=env, capture_output=True,
+                          check=False)
     return proc.returncode == 0
 
 

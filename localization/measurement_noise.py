@@ -19,7 +19,9 @@ Three pieces, all free functions on residual arrays:
 - :func:`consistency_inflation`: what remains (errors that no white-noise model
   describes, e.g. a localizer a little off through a whole turn) is measured by running the
   filter on a recorded drive with known poses, and Q and R are inflated per body component
-  until the filter's covariance matches its errors there (NEES calibration).
+  until the filter's covariance matches its errors there (NEES calibration, robust: e^2 / P
+  is clipped at chi2(1)'s 99th percentile, so the rare stretches where the filter is off
+  do not set the scale).
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.stats import chi2
 from sklearn.covariance import MinCovDet
 
 from envs.motion_model import wrap_angle
@@ -132,18 +135,28 @@ def body_errors(means: ArrayLike, covs: ArrayLike, poses: ArrayLike) -> tuple[Ar
     return e, T @ covs @ np.swapaxes(T, 1, 2)
 
 
+_CLIP = float(chi2.ppf(0.99, 1))
+_CLIPPED_MEAN = float(chi2.cdf(_CLIP, 3) + _CLIP * chi2.sf(_CLIP, 1))  # E min(chi2(1), clip)
+
+
 def consistency_inflation(run: Callable[[Array], tuple[Array, Array]], poses: ArrayLike,
                           iterations: int = 4, burn_in: int = 30, lost: float = 1.0,
                           max_alpha: float = 100.0, start: ArrayLike | None = None) -> Array:
     """Per-component covariance inflation ``alpha`` (along, cross, heading) that makes a filter
-    consistent on a recorded drive: mean ``e_j^2 / P_jj`` = 1 in the body frame.
+    consistent on a recorded drive: in the body frame, ``min(e_j^2 / P_jj, c)`` has the mean of
+    ``min(chi2(1), c)``, with ``c`` chi2(1)'s 99th percentile (6.63; that mean is 0.98).
 
     Scaling Q, R and P0 of a linear filter by the same factor leaves its estimates unchanged
     and scales P by that factor; per body component this holds approximately, so a few
-    fixed-point steps ``alpha_j <- alpha_j mean(e_j^2 / P_jj)`` converge. Only inflation is
-    applied (``alpha >= 1``): a conservative component is left alone. Steps where the filter
-    is lost (position error above ``lost`` metres) are left out: that is a failure for the
-    recovery logic, not noise to average into every step's covariance.
+    fixed-point steps ``alpha_j <- alpha_j mean(min(e_j^2 / P_jj, c)) / E min(chi2(1), c)``
+    converge. Clipped, not the plain mean: with a NIS gate the premise fails for the tail. A
+    wider gate lets more aliased measurements through, the filter errs more, the mean asks
+    for a wider gate still: on a street-wide localizer of 5000 images the plain mean ran to
+    the bound (100) on every component and the scripted agent reached 11 of 30 goals; with
+    the median of e^2 / P (a robust statistic like this one) 26 (alpha 7, 22, 1.2). Only
+    inflation is applied (``alpha >= 1``): a conservative component is left
+    alone. Steps where the filter is lost (position error above ``lost`` metres) are left
+    out: that is a failure for the recovery logic, not noise to scale every step by.
 
     Parameters
     ----------
@@ -170,7 +183,8 @@ def consistency_inflation(run: Callable[[Array], tuple[Array, Array]], poses: Ar
         ok = np.hypot(e[:, 0], e[:, 1]) < lost
         if ok.sum() < 10:
             break
-        ratio = np.mean(e[ok] ** 2 / np.diagonal(P[ok], axis1=1, axis2=2), axis=0)
+        r = e[ok] ** 2 / np.diagonal(P[ok], axis1=1, axis2=2)
+        ratio = np.mean(np.minimum(r, _CLIP), axis=0) / _CLIPPED_MEAN
         alpha = np.clip(alpha * ratio, 1.0, max_alpha)
     return alpha
 

@@ -3,15 +3,17 @@
 Shared by ``scripts/track.py``, ``scripts/demo.py``, ``scripts/bench_filter.py`` and the tests.
 
 - :func:`fit_city_localizer`: the whole fit on one city: images around the driving lanes
-  (``envs.collect_dataset(mode="lanes")``), :meth:`AppearanceLocalizer.fit`, a drive around
-  the route on the true pose for the process and measurement noise
-  (:meth:`AppearanceLocalizer.fit_noise`) and a first consistency calibration
-  (:meth:`AppearanceLocalizer.calibrate`), then a drive on that belief (closed loop,
-  "representation" model) on which the calibration is refined: in closed loop the robot
-  follows the belief's errors, which the true-pose drive does not show.
-- :func:`track_route`: drive ``steps`` steps along the route with a pure-pursuit controller
-  on the belief mean (:class:`~localization.wrappers.BeliefWrapper`), and dead-reckon the
-  same commanded controls from the true start pose (F alone).
+  (``envs.collect_dataset(mode="lanes")``), :meth:`AppearanceLocalizer.fit`, a drive on the
+  true pose for the process and measurement noise (:meth:`AppearanceLocalizer.fit_noise`)
+  and a first consistency calibration (:meth:`AppearanceLocalizer.calibrate`), then a drive
+  on that belief (closed loop, "representation" model) on which the calibration is refined:
+  in closed loop the robot follows the belief's errors, which the true-pose drive does not
+  show. The drives go where the training lanes go: around the route (``lanes="route"``) or
+  along random tours of all the streets, both ways (``lanes="streets"``).
+- :func:`track_route` / :func:`track_streets`: drive ``steps`` steps along the route / a
+  random street tour with a pure-pursuit controller on the belief mean
+  (:class:`~localization.wrappers.BeliefWrapper`), and dead-reckon the same commanded
+  controls from the true start pose (F alone).
 - :func:`track_metrics`: position RMSE of the belief and of dead reckoning, their ratio,
   heading RMSE, mean NEES and NIS, measurement acceptance.
 """
@@ -27,7 +29,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
-from envs.datasets import PurePursuit, collect_dataset, drive_route
+from envs.datasets import PurePursuit, collect_dataset, drive_route, drive_streets
+from envs.lanes import street_tour
 from envs.motion_model import wrap_angle
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer
 from localization.wrappers import BeliefWrapper
@@ -71,7 +74,8 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
     lanes : {"route", "streets"}
         Lanes of the training images (see :mod:`envs.lanes`).
     n_drive : int
-        Steps of each noise drive.
+        Steps of each noise drive (around the route for ``lanes="route"``, along random
+        street tours for ``lanes="streets"``).
     seed : int
         Seeds the training poses and the drives (drive seeds ``seed + 1``, ``seed + 2``).
     localizer_params : dict, optional
@@ -102,16 +106,31 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
     loc.fit(images, poses, camera=getattr(env.unwrapped, "camera_name", None))
     seconds["fit"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    motion_model = env.unwrapped.motion_model
-    images, poses, controls = drive_route(env, n_drive, seed=seed + 1, progress=progress)
-    loc.fit_noise(motion_model, images, poses, controls)
-    loc.calibrate(motion_model, images, poses, controls, measurements)
-    if calibrate_on_belief:
-        run = track_route(env, loc, "representation", n_drive, start=0, seed=seed + 2,
-                          keep_images=True)
-        loc.calibrate(motion_model, run.images, run.true, run.controls, measurements)
+    fit_city_noise(env, loc, lanes, n_drive, seed, calibrate_on_belief, measurements, progress)
     seconds["noise"] = time.perf_counter() - t0
     return loc, seconds
+
+
+def fit_city_noise(env: gym.Env, localizer: AppearanceLocalizer, lanes: str = "route",
+                   n_drive: int = 1500, seed: int = 0, calibrate_on_belief: bool = True,
+                   measurements: tuple[str, ...] = MEASUREMENTS, progress: bool = False,
+                   ) -> AppearanceLocalizer:
+    """The noise stage of :func:`fit_city_localizer` for a fitted localizer (same arguments):
+    noise from a drive on the true pose (seed ``seed + 1``), consistency calibrated on it
+    and then on a drive on the belief (seed ``seed + 2``)."""
+    if lanes not in ("route", "streets"):
+        raise ValueError(f"unknown lanes {lanes!r}; choose 'route' or 'streets'")
+    motion_model = env.unwrapped.motion_model
+    streets = lanes == "streets"
+    drive = drive_streets if streets else drive_route
+    images, poses, controls = drive(env, n_drive, seed=seed + 1, progress=progress)
+    localizer.fit_noise(motion_model, images, poses, controls)
+    localizer.calibrate(motion_model, images, poses, controls, measurements)
+    if calibrate_on_belief:
+        track = track_streets if streets else track_route
+        run = track(env, localizer, "representation", n_drive, seed=seed + 2, keep_images=True)
+        localizer.calibrate(motion_model, run.images, run.true, run.controls, measurements)
+    return localizer
 
 
 def track_route(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
@@ -123,13 +142,34 @@ def track_route(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
     along it; :class:`PurePursuit` steers on the belief mean (never on the true pose).
     ``wrapper_options`` go to :class:`BeliefWrapper`.
     """
+    base = env.unwrapped
+    pilot = PurePursuit(base.city.route(), w_max=base.W_MAX)
+    return _track(env, localizer, measurement, pilot, pilot.start_pose(start), steps, seed,
+                  keep_images, wrapper_options)
+
+
+def track_streets(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
+                  steps: int, seed: int = 0, keep_images: bool = False,
+                  speed: float = 0.6, **wrapper_options: Any) -> TrackResult:
+    """Drive ``steps`` steps along a random tour of the streets (``envs.lanes.street_tour``
+    drawn from ``seed``) on the belief mean, from the tour's first intersection."""
+    base = env.unwrapped
+    tour = street_tour(base.city, 1.5 * steps * base.dt * speed + 10.0,
+                       np.random.default_rng(seed))
+    pilot = PurePursuit(tour, speed=speed, w_max=base.W_MAX, closed=False)
+    return _track(env, localizer, measurement, pilot, pilot.start_pose(0), steps, seed,
+                  keep_images, wrapper_options)
+
+
+def _track(env: gym.Env, localizer: AppearanceLocalizer, measurement: str, pilot: PurePursuit,
+           start: Array, steps: int, seed: int, keep_images: bool,
+           wrapper_options: dict[str, Any]) -> TrackResult:
     if measurement not in MEASUREMENTS:
         raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
     base = env.unwrapped
     wrapped = BeliefWrapper(env, localizer, measurement, keep_image=keep_images,
                             **wrapper_options)
-    pilot = PurePursuit(base.city.route(), w_max=base.W_MAX)
-    obs, info = wrapped.reset(seed=seed, options={"pose": pilot.start_pose(start)})
+    obs, info = wrapped.reset(seed=seed, options={"pose": start})
     rows = {"true": [info["pose"]], "mean": [wrapped.mean], "cov": [wrapped.cov],
             "nis": [info["nis"]], "nees": [info["nees"]]}
     status, controls, images = [info["measurement_status"]], [], [obs.get("image")]

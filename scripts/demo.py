@@ -13,11 +13,15 @@ Stages:
 2. collect training images around the driving lanes (every street both ways and every turn
    with ``--lanes streets``, so agents can use the localizer anywhere; only the route's with
    ``--lanes route``) and fit the :class:`AppearanceLocalizer` (features + GSE); estimate the
-   noise model on a drive around the route and calibrate it on a drive on the belief
+   noise model on a drive where the lanes go (random street tours, or around the route) and
+   calibrate it on a drive on the belief
    (``localization.tracking.fit_city_localizer``); save it to ``<out>/localizer.npz``;
 3. closed-loop tracking: for each measurement model drive ``--steps`` steps of the route
    with a pure-pursuit controller on the belief mean, against dead reckoning; write
-   ``<out>/track_<model>.png`` and print the results table (also ``<out>/demo.md``).
+   ``<out>/track_<model>.png`` and print the results table (also ``<out>/demo.md``);
+4. navigation: the scripted agent (street planner + pure pursuit) drives ``--episodes``
+   seeded episodes to random goals on each pose source (true pose, belief, dead reckoning;
+   ``scripts/eval_agents.py``), table in ``<out>/demo_agents/agents.md``.
 """
 
 from __future__ import annotations
@@ -31,14 +35,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+for p in (ROOT, ROOT / "scripts"):
+    if str(p) not in sys.path:
+        sys.path.insert(0, str(p))
 
 import envs  # chooses MUJOCO_GL before mujoco is imported
 
 # isort: split
 import warnings
 
+import eval_agents
 import gymnasium as gym
 import matplotlib
 import numpy as np
@@ -67,6 +73,8 @@ class Args:
     n_drive: int = field(default=1000, metadata={"help": "steps of each noise drive"})
     steps: int = field(default=1000, metadata={"help": "steps of each tracking run"})
     start: int = field(default=0, metadata={"help": "tracking start (route path point)"})
+    episodes: int = field(default=30, metadata={
+        "help": "navigation episodes of the scripted agent per pose source (0: skip)"})
     out: str = field(default="results", metadata={"help": "output folder"})
 
 
@@ -164,9 +172,21 @@ def main(argv: list[str] | None = None) -> dict:
     env.close()
     table = results_table(rows)
     (out / "demo.md").write_text(table)
+    navigation = []
+    if args.episodes > 0:
+        t1 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
+            navigation = eval_agents.main([
+                "--agents", "scripted", "--episodes", str(args.episodes),
+                "--localizer", str(out / "localizer.npz"), "--scene-seed", str(args.scene_seed),
+                "--camera", args.camera, "--image-size", str(args.image_size),
+                "--motion-noise", str(args.motion_noise), "--out", str(out / "demo_agents")])
+        seconds["navigate"] = time.perf_counter() - t1
     seconds["total"] = time.perf_counter() - t0
     summary = {"dataset": str(dataset), "route_png": str(figure), "frames": len(poses),
                "localizer": str(out / "localizer.npz"), "tracking": rows,
+               "navigation": navigation,
                "control_gain": loc.control_gain_.tolist(),
                "consistency": {k: v.tolist() for k, v in loc.consistency_.items()},
                "seconds": {k: round(v, 1) for k, v in seconds.items()}}

@@ -1,5 +1,7 @@
 """Driving lanes of the street graph and the poses sampled around them."""
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -69,11 +71,11 @@ def test_street_tour_drives_the_graph_without_u_turns(city):
     linked = {tuple(sorted(e)) for e in edges}
     tour = street_tour(city, 200.0, np.random.default_rng(3))
     index = [int(np.flatnonzero(np.all(nodes == p, axis=1))[0]) for p in tour]
-    assert all(tuple(sorted(ab)) in linked for ab in zip(index, index[1:]))  # along streets
+    assert all(tuple(sorted(ab)) in linked for ab in itertools.pairwise(index))  # along streets
     assert all(a != c for a, c in zip(index, index[2:]))  # never straight back
     length = np.hypot(*np.diff(tour, axis=0).T).sum()
     assert 200.0 <= length < 200.0 + city.size
-    driven = {tuple(ab) for ab in zip(index, index[1:])}
+    driven = {tuple(ab) for ab in itertools.pairwise(index)}
     assert any((b, a) in driven for a, b in driven)  # streets are driven both ways
     assert len({tuple(sorted(ab)) for ab in driven}) > len(edges) / 2
     assert np.array_equal(tour, street_tour(city, 200.0, np.random.default_rng(3)))
