@@ -182,8 +182,8 @@ def load_efficientnet_lite0(path: str | Path | None = None) -> EfficientNetLite0
     path : str or Path, optional
         State dict file; defaults to :func:`weights_path`.
     """
-    state = torch.load(weights_path() if path is None else path, map_location="cpu",
-                       weights_only=True)
+    file = weights_path() if path is None else path
+    state = torch.load(file, map_location="cpu", weights_only=True)
     model = EfficientNetLite0()
     model.load_state_dict(state, strict=True)
     return model.eval()

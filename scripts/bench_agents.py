@@ -17,7 +17,6 @@ belief reaches >= 0.9x the success rate of PPO on the true pose; each training r
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import platform
@@ -39,6 +38,7 @@ import train_agent
 
 TARGET_RATIO = 0.9
 TARGET_TRAIN_MINUTES = 30.0
+from cli import parse_dataclass_args
 
 
 @dataclass
@@ -56,12 +56,7 @@ class Args:
 
 def parse_args(argv: list[str] | None = None) -> Args:
     """Parse ``--field-name value`` options built from the fields of ``Args``."""
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    for f in dataclasses.fields(Args):
-        parser.add_argument("--" + f.name.replace("_", "-"), type=type(f.default),
-                            default=f.default, help=f"{f.metadata['help']} (default: {f.default!r})")
-    return Args(**vars(parser.parse_args(argv)))
+    return parse_dataclass_args(Args, __doc__, argv)
 
 
 def main(argv: list[str] | None = None) -> dict:

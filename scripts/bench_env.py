@@ -24,7 +24,6 @@ Targets (PASS/MISS): >= 1000 env steps/s (median) at 64x64 (perspective) and rat
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import os
@@ -51,6 +50,7 @@ from envs.robot import HALF_TRACK, WHEEL_RADIUS
 
 TARGET_STEPS_PER_S = 1000.0
 TARGET_RATIO = 0.8
+from cli import parse_dataclass_args
 
 
 @dataclass
@@ -68,15 +68,7 @@ class Args:
 
 def parse_args(argv: list[str] | None = None) -> Args:
     """Parse ``--field-name value`` options (booleans are flags) from the fields of ``Args``."""
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    for f in dataclasses.fields(Args):
-        name = "--" + f.name.replace("_", "-")
-        if isinstance(f.default, bool):
-            parser.add_argument(name, action="store_true", help=f.metadata["help"])
-        else:
-            parser.add_argument(name, type=type(f.default), default=f.default,
-                                help=f"{f.metadata['help']} (default: {f.default!r})")
-    args = Args(**vars(parser.parse_args(argv)))
+    args = parse_dataclass_args(Args, __doc__, argv)
     if args.quick:
         args.sizes, args.steps, args.chunk, args.warmup = "64", 400, 50, 10
     return args

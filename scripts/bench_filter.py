@@ -21,7 +21,6 @@ What is measured
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import platform
@@ -48,6 +47,7 @@ from localization.wrappers import BeliefWrapper
 
 TARGET_MS = {"pixel_pca": 5.0, "efficientnet": 40.0}
 TARGET_RATIO = 0.10
+from cli import parse_dataclass_args
 
 
 @dataclass
@@ -70,16 +70,7 @@ class Args:
 
 
 def parse_args(argv: list[str] | None = None) -> Args:
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    for f in dataclasses.fields(Args):
-        name = "--" + f.name.replace("_", "-")
-        if isinstance(f.default, bool):
-            parser.add_argument(name, action="store_true", help=f.metadata["help"])
-        else:
-            parser.add_argument(name, type=type(f.default), default=f.default,
-                                help=f"{f.metadata['help']} (default: {f.default!r})")
-    args = Args(**vars(parser.parse_args(argv)))
+    args = parse_dataclass_args(Args, __doc__, argv)
     if args.quick:
         args.n_train, args.n_train_dcnn, args.n_drive = 1500, 400, 400
         args.steps, args.runs, args.overhead_steps, args.chunk = 200, 1, 100, 25

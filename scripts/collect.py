@@ -11,7 +11,6 @@ The file holds ``images`` (n, H, W, 3) uint8, ``poses`` (n, 3) float64 ``[x, y, 
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import sys
 import time
@@ -26,6 +25,7 @@ import envs  # chooses MUJOCO_GL before mujoco is imported
 
 # isort: split
 import gymnasium as gym
+from cli import parse_dataclass_args
 
 
 @dataclass
@@ -44,11 +44,7 @@ class Args:
 
 def parse_args(argv: list[str] | None = None) -> Args:
     """Parse ``--field-name value`` options built from the fields of ``Args``."""
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    for f in dataclasses.fields(Args):
-        parser.add_argument("--" + f.name.replace("_", "-"), type=type(f.default), default=f.default,
-                            help=f"{f.metadata['help']} (default: {f.default!r})")
-    return Args(**vars(parser.parse_args(argv)))
+    return parse_dataclass_args(Args, __doc__, argv)
 
 
 def main(argv: list[str] | None = None) -> Path:

@@ -26,7 +26,6 @@ Stages:
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import sys
@@ -51,6 +50,7 @@ import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+from cli import parse_dataclass_args
 
 from localization.localizer import MEASUREMENTS
 from localization.plotting import plot_track
@@ -80,12 +80,7 @@ class Args:
 
 def parse_args(argv: list[str] | None = None) -> Args:
     """Parse ``--field-name value`` options built from the fields of ``Args``."""
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    for f in dataclasses.fields(Args):
-        parser.add_argument("--" + f.name.replace("_", "-"), type=type(f.default),
-                            default=f.default, help=f"{f.metadata['help']} (default: {f.default!r})")
-    return Args(**vars(parser.parse_args(argv)))
+    return parse_dataclass_args(Args, __doc__, argv)
 
 
 def plot_route(env: gym.Env, images: np.ndarray, poses: np.ndarray, n_strip: int,

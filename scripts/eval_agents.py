@@ -20,7 +20,6 @@ to goal (simulated seconds, over successes), belief RMSE (m, belief mean vs true
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import sys
@@ -42,6 +41,7 @@ from agents.sources import POSE_SOURCES, make_pose_env
 from localization.localizer import AppearanceLocalizer
 
 AGENTS = ("scripted", "ppo")
+from cli import parse_dataclass_args
 
 
 @dataclass
@@ -69,12 +69,7 @@ class Args:
 
 def parse_args(argv: list[str] | None = None) -> Args:
     """Parse ``--field-name value`` options built from the fields of ``Args``."""
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    for f in dataclasses.fields(Args):
-        parser.add_argument("--" + f.name.replace("_", "-"), type=type(f.default),
-                            default=f.default, help=f"{f.metadata['help']} (default: {f.default!r})")
-    args = Args(**vars(parser.parse_args(argv)))
+    args = parse_dataclass_args(Args, __doc__, argv)
     for name, known in (("agents", AGENTS), ("sources", POSE_SOURCES)):
         bad = set(getattr(args, name).split(",")) - set(known)
         if bad:

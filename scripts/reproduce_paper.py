@@ -23,7 +23,6 @@ to ``--out``:
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import sys
@@ -57,6 +56,7 @@ CAMERAS = ("perspective", "fisheye", "catadioptric")
 #: data (the paper's setting); the random 3-DoF data use all ``n_components`` (the 30-minute
 #: budget: GSE fits with q=3 dominate the run).
 FEATURE_DIMS = (16, 32)
+from cli import parse_dataclass_args
 
 
 @dataclass
@@ -89,16 +89,7 @@ class Args:
 
 def parse_args(argv: list[str] | None = None) -> Args:
     """Command-line parser generated from the ``Args`` dataclass fields."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    for f in dataclasses.fields(Args):
-        flag = "--" + f.name.replace("_", "-")
-        if f.type in ("bool", bool):
-            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=f.default,
-                                help=f.metadata["help"])
-        else:
-            typ = {"int": int, "float": float, "str": str}[str(f.type)]
-            parser.add_argument(flag, type=typ, default=f.default, help=f.metadata["help"])
-    args = Args(**vars(parser.parse_args(argv)))
+    args = parse_dataclass_args(Args, __doc__, argv)
     if args.quick:
         args = dataclasses.replace(args, n=min(args.n, 500), cv=2, intrinsic_samples=400,
                                    features="pixel_pca,small_cnn")

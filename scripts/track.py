@@ -15,7 +15,6 @@ mean NEES and its chi-square band over the runs, NIS, acceptance, time per step)
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import sys
@@ -33,6 +32,7 @@ import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
 # isort: split
 import gymnasium as gym
 import numpy as np
+from cli import parse_dataclass_args
 
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer
 from localization.plotting import plot_track
@@ -62,12 +62,7 @@ class Args:
 
 def parse_args(argv: list[str] | None = None) -> Args:
     """Parse ``--field-name value`` options built from the fields of ``Args``."""
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    for f in dataclasses.fields(Args):
-        parser.add_argument("--" + f.name.replace("_", "-"), type=type(f.default),
-                            default=f.default, help=f"{f.metadata['help']} (default: {f.default!r})")
-    return Args(**vars(parser.parse_args(argv)))
+    return parse_dataclass_args(Args, __doc__, argv)
 
 
 def make_env(args: Args) -> gym.Env:

@@ -16,7 +16,6 @@ and ``train.json`` (settings, timing, final evaluation).
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import sys
@@ -33,6 +32,7 @@ import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
 # isort: split
 import numpy as np
 import torch
+from cli import parse_dataclass_args
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
@@ -77,14 +77,7 @@ class Args:
 
 def parse_args(argv: list[str] | None = None) -> Args:
     """Parse ``--field-name value`` options built from the fields of ``Args``."""
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    for f in dataclasses.fields(Args):
-        kind = (lambda s: s.lower() in ("1", "true", "yes")) if isinstance(f.default, bool) \
-            else type(f.default)
-        parser.add_argument("--" + f.name.replace("_", "-"), type=kind, default=f.default,
-                            help=f"{f.metadata['help']} (default: {f.default!r})")
-    return Args(**vars(parser.parse_args(argv)))
+    return parse_dataclass_args(Args, __doc__, argv)
 
 
 class ProgressBar(BaseCallback):

@@ -15,7 +15,6 @@ use as ``SmallCNNFeatures(weights=<out>)``) and ``<out>.json`` (args, loss histo
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import sys
@@ -28,6 +27,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import torch
+from cli import parse_dataclass_args
 
 from localization.small_cnn import save_small_cnn, train_small_cnn
 
@@ -62,16 +62,7 @@ class Args:
 
 def parse_args(argv: list[str] | None = None) -> Args:
     """Command-line parser generated from the ``Args`` dataclass fields."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    for f in dataclasses.fields(Args):
-        flag = "--" + f.name.replace("_", "-")
-        if f.type in ("bool", bool):
-            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=f.default,
-                                help=f.metadata["help"])
-        else:
-            typ = {"int": int, "float": float, "str": str}[str(f.type)]
-            parser.add_argument(flag, type=typ, default=f.default, help=f.metadata["help"])
-    return Args(**vars(parser.parse_args(argv)))
+    return parse_dataclass_args(Args, __doc__, argv)
 
 
 def parse_seeds(text: str) -> list[int]:
