@@ -45,8 +45,12 @@ from cli import parse_dataclass_args
 class Args:
     localizer: str = field(default="results/localizer.npz", metadata={
         "help": "fitted AppearanceLocalizer of the city (make demo writes it)"})
-    total_timesteps: int = field(default=300_000, metadata={"help": "PPO steps per pose source"})
+    total_timesteps: int = field(default=400_000, metadata={"help": "PPO steps per pose source"})
+    eval_freq: int = field(default=50_000, metadata={
+        "help": "steps between the EvalCallback's evaluations (counted in the training time)"})
     n_envs: int = field(default=8, metadata={"help": "environments per rollout"})
+    vec_env: str = field(default="subproc", metadata={
+        "help": "'subproc' (forked env workers) or 'dummy' (one process), for both sources"})
     seed: int = field(default=0, metadata={"help": "training seed (the same for both sources)"})
     episodes: int = field(default=100, metadata={"help": "evaluation episodes per agent and source"})
     scene_seed: int = field(default=0, metadata={"help": "the city"})
@@ -68,7 +72,8 @@ def main(argv: list[str] | None = None) -> dict:
     for source in ("oracle", "belief"):
         training[source] = train_agent.main([
             "--pose-source", source, "--total-timesteps", str(args.total_timesteps),
-            "--n-envs", str(args.n_envs), "--seed", str(args.seed),
+            "--n-envs", str(args.n_envs), "--vec-env", args.vec_env, "--seed", str(args.seed),
+            "--eval-freq", str(args.eval_freq),
             "--out", str(out / "agents"), *common])
     t0 = time.perf_counter()
     rows = eval_agents.main(["--episodes", str(args.episodes), "--policies", str(out / "agents"),

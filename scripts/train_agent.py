@@ -36,7 +36,7 @@ from cli import parse_dataclass_args
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.vec_env import DummyVecEnv
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
 from tqdm import tqdm
 
 from agents.observations import NavigationObservation
@@ -63,7 +63,10 @@ class Args:
         "help": "episode starts: 'lane' (on a street, facing along it) or 'random' (any free pose)"})
     max_episode_steps: int = field(default=400, metadata={"help": "episode truncation"})
     total_timesteps: int = field(default=300_000, metadata={"help": "PPO environment steps"})
-    n_envs: int = field(default=8, metadata={"help": "environments per rollout (in-process)"})
+    n_envs: int = field(default=8, metadata={"help": "environments per rollout"})
+    vec_env: str = field(default="subproc", metadata={
+        "help": "'subproc' (the envs step in forked worker processes: all cores render and "
+                "filter) or 'dummy' (one process)"})
     n_steps: int = field(default=256, metadata={"help": "rollout steps per environment"})
     batch_size: int = field(default=512, metadata={"help": "PPO minibatch size"})
     seed: int = field(default=0, metadata={"help": "seed of PPO and of the training resets"})
@@ -111,9 +114,14 @@ class PolicyCheckpoint(BaseCallback):
         return True
 
 
-def make_vec_env(args: Args, localizer: AppearanceLocalizer | None, n: int, seed: int
-                 ) -> DummyVecEnv:
-    """``n`` navigation envs on the pose source, seeded from ``seed``."""
+VEC_ENVS = ("subproc", "dummy")
+
+
+def make_vec_env(args: Args, localizer: AppearanceLocalizer | None, n: int, seed: int,
+                 kind: str = "dummy") -> VecEnv:
+    """``n`` navigation envs on the pose source, seeded from ``seed``, in this process
+    (``kind="dummy"``) or each in a forked worker (``"subproc"``: the workers inherit the
+    loaded localizer, nothing is pickled; fork before this process opens a GL context)."""
     def make() -> NavigationObservation:
         env = make_pose_env(args.pose_source, localizer, measurement=args.measurement or None,
                             scene_seed=args.scene_seed, camera=args.camera,
@@ -121,7 +129,10 @@ def make_vec_env(args: Args, localizer: AppearanceLocalizer | None, n: int, seed
                             motion_noise=args.motion_noise,
                             max_episode_steps=args.max_episode_steps, start=args.start)
         return Monitor(NavigationObservation(StreetProgressReward(env)))
-    venv = DummyVecEnv([make] * n)
+    if kind not in VEC_ENVS:
+        raise ValueError(f"unknown vec_env {kind!r}; choose one of {VEC_ENVS}")
+    venv = SubprocVecEnv([make] * n, start_method="fork") if kind == "subproc" \
+        else DummyVecEnv([make] * n)
     venv.seed(seed)
     return venv
 
@@ -134,7 +145,7 @@ def main(argv: list[str] | None = None) -> dict:
     localizer = None
     if args.pose_source != "oracle":
         localizer = AppearanceLocalizer.load(args.localizer)
-    venv = make_vec_env(args, localizer, args.n_envs, args.seed)
+    venv = make_vec_env(args, localizer, args.n_envs, args.seed, args.vec_env)  # forks first
     eval_env = make_vec_env(args, localizer, 1, args.seed + 1_000_000)
     model = make_ppo(venv, seed=args.seed, n_steps=args.n_steps, batch_size=args.batch_size)
     model.set_logger(configure(str(out), ["csv"]))
