@@ -22,14 +22,15 @@ from itertools import pairwise
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import shortest_path
+
+from localization.geometry import Array
 
 __all__ = ["PlannedPath", "StreetPlanner", "path_length", "project_to_segments",
            "round_corners"]
 
-Array = NDArray[np.float64]
 
 
 def project_to_segments(p: Array, a: Array, b: Array) -> tuple[Array, Array, Array]:

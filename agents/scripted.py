@@ -15,11 +15,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.planner import PlannedPath, StreetPlanner
+from localization.geometry import Array, wrap_angle
 
 __all__ = ["BELIEF_KEYS", "Navigator", "ScriptedAgent", "check_belief_observation",
            "pure_pursuit"]
 
-Array = NDArray[np.float64]
 BELIEF_KEYS = ("pose_mean", "pose_cov", "goal")
 
 
@@ -54,10 +54,6 @@ def check_belief_observation(obs: Any) -> tuple[Array, Array, Array]:
     return out[0], out[1], out[2]
 
 
-def _wrap(a: float) -> float:
-    return float(np.pi - np.mod(np.pi - a, 2.0 * np.pi))
-
-
 def pure_pursuit(pose: Array, carrot: Array, remaining: float, speed: float, w_max: float,
                  turn_in_place: float) -> Array:
     """Pure-pursuit control U = [v, w] (2,) steering the pose [x, y, yaw] towards ``carrot``.
@@ -66,7 +62,7 @@ def pure_pursuit(pose: Array, carrot: Array, remaining: float, speed: float, w_m
     streets are narrow); slows down over the last metre (``remaining`` m to the goal).
     """
     dx, dy = carrot[0] - pose[0], carrot[1] - pose[1]
-    alpha = _wrap(np.arctan2(dy, dx) - pose[2])
+    alpha = float(wrap_angle(np.arctan2(dy, dx) - pose[2]))
     if abs(alpha) > turn_in_place:
         return np.array([0.0, np.copysign(w_max, alpha)])
     v = speed * np.cos(alpha) * min(1.0, 0.5 + remaining)

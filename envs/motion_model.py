@@ -18,13 +18,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from localization.geometry import wrap_angle
+
 _SMALL_W = 1e-6
-
-
-def wrap_angle(a: ArrayLike) -> NDArray[np.float64]:
-    """Wrap angles to (-pi, pi]."""
-    a = np.asarray(a, dtype=np.float64)
-    return np.pi - np.mod(np.pi - a, 2.0 * np.pi)
 
 
 def _check(pose: ArrayLike, u: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

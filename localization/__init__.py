@@ -1,1 +1,63 @@
-"""Localization toolkit: features, GSE regression, baselines, intrinsic dimension, EKF."""
+"""appearance-nav's localization toolkit: images -> features -> GSE regression -> pose belief.
+
+The public names, grouped by layer (imports flow one way, top to bottom)::
+
+    geometry      wrap_angle, pose_residual, body_to_world, ...   (numpy only)
+    features      PixelPCA, EfficientNetFeatures, SmallCNNFeatures, make_features
+    gse           GrassmannStiefelEigenmaps, GSERegressor, jacobian_regression
+    baselines     KernelRegressor, RetrievalRegressor (+ metrics, model_selection, ...)
+    filtering     PoseEKF, BeliefFilter, noise models
+    localizer     AppearanceLocalizer
+    wrappers      BeliefWrapper, OracleWrapper, DeadReckoningWrapper
+    workflows     fit_city_localizer, track_route, ... (import the simulator)
+
+Every name loads on first use (like ``gymnasium.wrappers``): ``import localization`` imports
+neither MuJoCo nor torch, and PixelPCA never needs torch.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+__version__ = "0.1.0"
+
+_LAZY = {
+    # geometry
+    "wrap_angle": "geometry", "pose_residual": "geometry", "body_to_world": "geometry",
+    "to_body": "geometry", "cov_to_triu": "geometry", "triu_to_cov": "geometry",
+    # features
+    "PixelPCA": "features", "EfficientNetFeatures": "features",
+    "SmallCNNFeatures": "features", "FeatureExtractor": "features",
+    "make_features": "features", "features_from_state": "features",
+    # GSE and the other regressors
+    "GrassmannStiefelEigenmaps": "gse", "GSERegressor": "gse",
+    "jacobian_regression": "gse",
+    "KernelRegressor": "baselines", "RetrievalRegressor": "baselines",
+    "grid_search": "model_selection", "select_n_neighbors": "model_selection",
+    "rrmse": "metrics", "rmse": "metrics", "angular_rmse": "metrics",
+    "angular_error": "metrics",
+    "intrinsic_dimension_table": "intrinsic_dim", "global_dimension": "intrinsic_dim",
+    # filtering
+    "PoseEKF": "filtering", "PoseMeasurement": "filtering",
+    "FunctionMeasurement": "filtering", "OutOfDomainError": "filtering",
+    "BeliefFilter": "filtering", "chi2_band": "filtering",
+    # the localizer and its Gymnasium wrappers
+    "AppearanceLocalizer": "localizer", "MEASUREMENTS": "localizer",
+    "BeliefWrapper": "wrappers", "OracleWrapper": "wrappers",
+    "DeadReckoningWrapper": "wrappers",
+    # workflows (import the simulator)
+    "fit_city_localizer": "workflows", "track_route": "workflows",
+    "track_streets": "workflows", "track_metrics": "workflows",
+}
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

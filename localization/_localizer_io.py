@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from localization.features import features_from_state
-from localization.regression import GSERegressor
+from localization.gse.regressor import GSERegressor
 
 FORMAT = "appearance-nav-localizer/2"
 _GROUPS = ("noise", "rms", "tau", "consistency")

@@ -3,7 +3,7 @@
 Process noise and control gains from recorded motion; measurement noise R from held-out
 residuals (K-fold refits on the training data, or a recorded drive with the residuals'
 correlation time); the consistency calibration that runs the filter over a drive. The
-maths is in :mod:`localization.measurement_noise` and :mod:`localization.process_noise`.
+maths is in :mod:`localization.filtering.measurement_noise` and :mod:`localization.filtering.process_noise`.
 """
 
 from __future__ import annotations
@@ -14,18 +14,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from sklearn.model_selection import KFold
 
-from localization.measurement_noise import (
-    body_to_world,
-    consistency_inflation,
+from localization.filtering.calibration import calibrate_consistency
+from localization.filtering.measurement_noise import (
     correlation_time,
     inflate,
     robust_covariance,
-    to_body,
 )
-from localization.process_noise import estimate_control_gain, estimate_process_noise
-from localization.regression import GSERegressor
+from localization.filtering.process_noise import estimate_control_gain, estimate_process_noise
+from localization.geometry import Array, to_body
+from localization.gse.regressor import GSERegressor
 
-Array = NDArray[np.float64]
 MEASUREMENTS = ("pose", "features", "representation")
 
 
@@ -53,9 +51,9 @@ class NoiseModelMixin:
         """Control gains and body-frame process noise from recorded motion (commanded
         controls against the true poses that followed them).
 
-        Sets ``control_gain_`` (:func:`~localization.process_noise.estimate_control_gain`;
+        Sets ``control_gain_`` (:func:`~localization.filtering.process_noise.estimate_control_gain`;
         (1, 1) with ``calibrate_controls=False``) and ``process_noise_body_``
-        (:func:`~localization.process_noise.estimate_process_noise` with the calibrated
+        (:func:`~localization.filtering.process_noise.estimate_process_noise` with the calibrated
         controls). The filter predicts with ``F(x, control_gain_ * U)``.
         """
         self._check_fitted()
@@ -101,24 +99,17 @@ class NoiseModelMixin:
 
         The filter of each model runs over the drive from its true start pose, and Q, R and
         P0 are inflated per body component (along, cross, heading) until its covariance
-        matches its errors (:func:`~localization.measurement_noise.consistency_inflation`);
+        matches its errors (:func:`~localization.filtering.measurement_noise.consistency_inflation`);
         sets ``consistency_[measurement]``, starting from its current value (calibrating on a
         true-pose drive first, then on a drive on that calibrated belief, refines it). Steps
         where the filter is lost (> 1 m off) do not count. Arguments as :meth:`fit_noise`.
         """
         self._check_fitted(noise=True)
         images, poses, controls = self._check_drive(images, poses, controls)
-        from localization.belief import BeliefFilter  # belief imports this module
-
         W = self.transform(images)
-        for m in measurements:
-            def run(alpha: Array, m: str = m) -> tuple[Array, Array]:
-                belief = BeliefFilter(self, motion_model, m, gate_probability, None, alpha)
-                P0 = body_to_world(inflate(self.noise_["pose"], alpha), poses[0, 2])
-                means, covs, _ = belief.run(W, controls, poses[0], P0)
-                return means, covs
-
-            self.consistency_[m] = consistency_inflation(run, poses, start=self.consistency(m))
+        self.consistency_.update(calibrate_consistency(
+            self, motion_model, W, poses, controls, measurements, gate_probability,
+            self.noise_["pose"]))
         return self
 
     @staticmethod

@@ -23,16 +23,14 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.metrics.pairwise import euclidean_distances
 from sklearn.model_selection import GridSearchCV, KFold
 from sklearn.neighbors import KNeighborsRegressor, NearestNeighbors
 from sklearn.utils.validation import check_is_fitted
 
-from localization.metrics import wrap_angle
-
-Array = NDArray[np.float64]
+from localization.geometry import Array, wrap_angle
 
 __all__ = ["KernelRegressor", "RetrievalRegressor"]
 

@@ -22,13 +22,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial.distance import pdist
 from sklearn.manifold import Isomap
 from sklearn.neighbors import NearestNeighbors, kneighbors_graph
 
-Array = NDArray[np.float64]
+from localization.geometry import Array
 
 __all__ = ["DimensionEstimate", "global_dimension", "intrinsic_dimension_table",
            "local_dimension", "pointwise_dimension"]

@@ -3,11 +3,11 @@
 It bundles what a filter needs to localize from images (seed paper section III.D):
 
 - an image region (rows of the image) and a feature extractor ``omega``
-  (:mod:`localization.features`);
-- a :class:`~localization.regression.GSERegressor` giving psi* (features -> pose),
+  (:mod:`localization.features.base`);
+- a :class:`~localization.gse.regressor.GSERegressor` giving psi* (features -> pose),
   Phi* (pose -> features) and the representation maps r*, R*;
 - measurement noise covariances R of the three measurement models, estimated from
-  held-out residuals (:mod:`localization.measurement_noise`): robustly
+  held-out residuals (:mod:`localization.filtering.measurement_noise`): robustly
   (:class:`sklearn.covariance.MinCovDet`, so the rare aliasing errors do not inflate R; the
   filter's NIS gate rejects those at run time), in the body frame (along track, cross
   track, heading) for the pose-like models. :meth:`AppearanceLocalizer.fit` takes them from
@@ -15,7 +15,7 @@ It bundles what a filter needs to localize from images (seed paper section III.D
   drive (held out from the fit), inflated by the residuals' correlation time, and then
   calibrates the filter's consistency on that drive;
 - the control gains and body-frame process noise ``Q_body`` of the motion model F,
-  estimated from recorded motion (:mod:`localization.process_noise`).
+  estimated from recorded motion (:mod:`localization.filtering.process_noise`).
 
 The three measurement models (chosen by name in :meth:`AppearanceLocalizer.measurement_model`):
 
@@ -44,16 +44,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from sklearn.exceptions import NotFittedError
 
-from envs.motion_model import wrap_angle
 from localization._localizer_io import load_localizer, save_localizer
 from localization._localizer_noise import MEASUREMENTS, NoiseModelMixin, check_data
 from localization.features import make_features
-from localization.filters import FunctionMeasurement, pose_residual
-from localization.measurement_noise import body_to_world, inflate
-from localization.process_noise import world_process_noise
-from localization.regression import GSERegressor
+from localization.filtering.ekf import FunctionMeasurement
+from localization.filtering.measurement_noise import inflate
+from localization.filtering.process_noise import world_process_noise
+from localization.geometry import Array, body_to_world, pose_residual, wrap_angle
+from localization.gse.regressor import GSERegressor
 
-Array = NDArray[np.float64]
 _YAW_BINS = 72
 
 #: :class:`GSERegressor` settings of the localizer (``regressor_params`` overrides them).
@@ -83,7 +82,7 @@ class AppearanceLocalizer(NoiseModelMixin):
     Parameters
     ----------
     features : str
-        Feature extractor name for :func:`localization.features.make_features`
+        Feature extractor name for :func:`localization.features.base.make_features`
         ("pixel_pca", "efficientnet", "small_cnn").
     features_params : dict, optional
         Keyword arguments of the extractor.

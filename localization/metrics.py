@@ -18,21 +18,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
-Array = NDArray[np.float64]
+from localization.geometry import Array, wrap_angle
 
 __all__ = ["angular_error", "angular_rmse", "rmse", "rrmse", "wrap_angle"]
-
-
-def wrap_angle(a: ArrayLike) -> Array:
-    """Wrap angles to (-pi, pi]; same formula as ``envs.motion_model.wrap_angle``.
-
-    Defined here so that importing the metrics does not import the ``envs``
-    package (whose ``__init__`` sets up rendering).
-    """
-    a = np.asarray(a, dtype=np.float64)
-    return np.pi - np.mod(np.pi - a, 2.0 * np.pi)
 
 
 def _as_pair(a: ArrayLike, b: ArrayLike, names: tuple[str, str]) -> tuple[Array, Array]:

@@ -15,14 +15,13 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 from sklearn.base import BaseEstimator
 from sklearn.exceptions import FitFailedWarning
 from sklearn.model_selection import GridSearchCV, KFold
 
-from .metrics import rrmse
-
-Array = NDArray[np.float64]
+from localization.geometry import Array
+from localization.gse.regressor import GSERegressor
+from localization.metrics import rrmse
 
 __all__ = ["PoseScorer", "grid_search", "select_n_neighbors"]
 
@@ -96,7 +95,6 @@ def select_n_neighbors(W: Array, Theta: Array, grid: tuple[int, ...] = (10, 15, 
     Returns the best k and the mean validation RRMSE for every k in ``grid``
     (``inf`` where a fit failed, e.g. a disconnected graph for small k).
     """
-    from .regression import GSERegressor  # late: regression re-exports this function
 
     periodic = tuple(params.get("periodic", ()))  # type: ignore[arg-type]
     columns = range(np.shape(Theta)[1])

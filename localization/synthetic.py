@@ -8,9 +8,8 @@ intrinsically flat, coordinates that are isometric to it).
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import NDArray
 
-Array = NDArray[np.float64]
+from localization.geometry import Array
 
 
 def _orthonormal_embedding(rng: np.random.Generator, d: int, D: int) -> Array:

@@ -9,7 +9,7 @@ the (3, 3) covariance row by row: ``[Pxx, Pxy, Pxyaw, Pyy, Pyyaw, Pyawyaw]``
 (:func:`cov_to_triu` / :func:`triu_to_cov`). An agent trained on one pose source runs on the
 others unchanged.
 
-- :class:`BeliefWrapper`: the EKF of :mod:`localization.filters` on an
+- :class:`BeliefWrapper`: the EKF of :mod:`localization.filtering.ekf` on an
   :class:`~localization.localizer.AppearanceLocalizer`: predict with the known motion model F
   and the commanded action, update with a GSE measurement model of the image, NIS-gated. The
   true pose is never used by the belief.
@@ -26,33 +26,14 @@ from typing import Any, SupportsFloat
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from sklearn.exceptions import NotFittedError
 
-from envs.motion_model import wrap_angle
-from localization.belief import BeliefFilter
-from localization.filters import PoseEKF
+from localization.filtering.belief import BeliefFilter
+from localization.filtering.ekf import PoseEKF
+from localization.filtering.process_noise import world_process_noise
+from localization.geometry import Array, cov_to_triu, wrap_angle
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer
-from localization.process_noise import world_process_noise
-
-Array = NDArray[np.float64]
-_TRIU = np.triu_indices(3)
-
-
-def cov_to_triu(P: ArrayLike) -> NDArray[np.float32]:
-    """The upper triangle (6,) of a (3, 3) covariance, row by row, float32."""
-    return np.asarray(P, dtype=np.float64)[_TRIU].astype(np.float32)
-
-
-def triu_to_cov(v: ArrayLike) -> Array:
-    """Inverse of :func:`cov_to_triu`: (..., 6) -> (..., 3, 3) float64."""
-    v = np.asarray(v, dtype=np.float64)
-    if v.shape[-1] != 6:
-        raise ValueError(f"need (..., 6) upper-triangle entries, got shape {v.shape}")
-    P = np.zeros(v.shape[:-1] + (3, 3))
-    P[..., _TRIU[0], _TRIU[1]] = v
-    P[..., _TRIU[1], _TRIU[0]] = v
-    return P
 
 
 def _nees(mean: Array, P: Array, pose: ArrayLike) -> float:
@@ -106,7 +87,7 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
     (clipped) action U and the localizer's control gains k, then the EKF update with the
     measurement of the chosen model from the new image, rejected when
     ``NIS > chi2.ppf(gate_probability, dim z)`` or when the GSE maps have no value there
-    (out of the training domain); see :class:`~localization.belief.BeliefFilter`. The initial
+    (out of the training domain); see :class:`~localization.filtering.belief.BeliefFilter`. The initial
     belief is psi* of the first image with the pose measurement noise: the true pose is
     never used.
 
@@ -129,7 +110,7 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         re-initialised from psi* of the current image (as at reset); None never does.
     inflate_after : int or None
         From this many consecutive gated measurements on, P is inflated each step so the
-        gate widens (see :class:`~localization.belief.BeliefFilter`); None never does.
+        gate widens (see :class:`~localization.filtering.belief.BeliefFilter`); None never does.
 
     Notes
     -----
@@ -254,7 +235,7 @@ class DeadReckoningWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
     """Dead reckoning: the motion model F alone from the true start pose.
 
     ``x = F(x, U)``, ``P = F P F^T + Q(x)`` every step with the commanded (clipped) action;
-    ``Q(x) = T(yaw) Q_body T(yaw)^T`` (:func:`localization.process_noise.world_process_noise`).
+    ``Q(x) = T(yaw) Q_body T(yaw)^T`` (:func:`localization.filtering.process_noise.world_process_noise`).
 
     Parameters
     ----------

@@ -14,7 +14,7 @@ What is measured
   query (``measure`` plus ``h``/``H``/``R`` at the prior), the EKF predict + update.
   Targets: <= 5 ms per step with PixelPCA, <= 40 ms with the DCNN (EfficientNet-Lite0).
 * Tracking (PixelPCA localizer fitted on the city, noise calibrated as in
-  ``localization.tracking.fit_city_localizer``): ``runs`` closed-loop runs of ``steps`` steps
+  ``localization.workflows.tracking.fit_city_localizer``): ``runs`` closed-loop runs of ``steps`` steps
   along the route per model; position RMSE of the belief vs dead reckoning (F alone from the
   true start pose, same controls). Target: RMSE <= 0.10 x dead reckoning over 1000 steps.
 """
@@ -42,7 +42,7 @@ import numpy as np
 
 from envs.datasets import PurePursuit, collect_dataset, drive_route
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer
-from localization.tracking import fit_city_localizer, track_metrics, track_route
+from localization.workflows.tracking import fit_city_localizer, track_metrics, track_route
 from localization.wrappers import BeliefWrapper
 
 TARGET_MS = {"pixel_pca": 5.0, "efficientnet": 40.0}

@@ -120,7 +120,7 @@ def _median_time(fn, repeats: int) -> float:
 
 def run_worker(args: Args) -> dict[str, Any]:
     """Fit GSE at n = args.worker_n in this (fresh) process and time its queries."""
-    from localization.regression import GSERegressor
+    from localization.gse.regressor import GSERegressor
     from localization.synthetic import regression_manifold
 
     n = args.worker_n
@@ -238,8 +238,8 @@ def _lift_pose(T: np.ndarray) -> np.ndarray:
 
 def run_accuracy(args: Args) -> list[dict[str, Any]]:
     from localization.baselines import KernelRegressor, RetrievalRegressor
+    from localization.gse.regressor import GSERegressor
     from localization.metrics import angular_rmse, rrmse
-    from localization.regression import GSERegressor
     from localization.synthetic import regression_manifold
 
     rows = []

@@ -15,7 +15,7 @@ Stages:
    ``--lanes route``) and fit the :class:`AppearanceLocalizer` (features + GSE); estimate the
    noise model on a drive where the lanes go (random street tours, or around the route) and
    calibrate it on a drive on the belief
-   (``localization.tracking.fit_city_localizer``); save it to ``<out>/localizer.npz``;
+   (``localization.workflows.tracking.fit_city_localizer``); save it to ``<out>/localizer.npz``;
 3. closed-loop tracking: for each measurement model drive ``--steps`` steps of the route
    with a pure-pursuit controller on the belief mean, against dead reckoning; write
    ``<out>/track_<model>.png`` and print the results table (also ``<out>/demo.md``);
@@ -53,8 +53,8 @@ import matplotlib.pyplot as plt
 from cli import parse_dataclass_args
 
 from localization.localizer import MEASUREMENTS
-from localization.plotting import plot_track
-from localization.tracking import fit_city_localizer, track_metrics, track_route
+from localization.workflows.plotting import plot_track
+from localization.workflows.tracking import fit_city_localizer, track_metrics, track_route
 
 
 @dataclass

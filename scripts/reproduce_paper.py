@@ -42,11 +42,11 @@ import gymnasium as gym
 import envs
 from envs.projections import projection_directions
 from envs.robot import CAMERA_FOVY, CAMERA_HEIGHT
-from localization.experiment import evaluate_methods, fit_gse
 from localization.features import EfficientNetFeatures, PixelPCA
+from localization.features.small_cnn import SmallCNNFeatures
+from localization.features.weights import small_cnn_weights
 from localization.intrinsic_dim import intrinsic_dimension_table
-from localization.small_cnn import SmallCNNFeatures
-from localization.weights import small_cnn_weights
+from localization.workflows.experiment import evaluate_methods, fit_gse
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import paper_report

@@ -35,8 +35,13 @@ import numpy as np
 from cli import parse_dataclass_args
 
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer
-from localization.plotting import plot_track
-from localization.tracking import fit_city_localizer, nees_band, track_metrics, track_route
+from localization.workflows.plotting import plot_track
+from localization.workflows.tracking import (
+    fit_city_localizer,
+    nees_band,
+    track_metrics,
+    track_route,
+)
 
 
 @dataclass

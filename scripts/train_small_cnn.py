@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import torch
 from cli import parse_dataclass_args
 
-from localization.small_cnn import save_small_cnn, train_small_cnn
+from localization.features.small_cnn import save_small_cnn, train_small_cnn
 
 
 @dataclass

@@ -16,7 +16,7 @@ import envs  # noqa: F401  (registers the env)
 from agents.evaluation import run_episodes, summarize
 from agents.scripted import ScriptedAgent
 from agents.sources import make_pose_env
-from localization.tracking import fit_city_localizer
+from localization.workflows.tracking import fit_city_localizer
 
 CITY = 0  # the default city
 N_TRAIN = 10000

@@ -9,7 +9,8 @@ import pytest
 from sklearn.exceptions import NotFittedError
 
 from envs.motion_model import wrap_angle
-from localization.filters import numerical_jacobian, pose_residual
+from localization.filtering.ekf import numerical_jacobian
+from localization.geometry import pose_residual
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer, sparsest_heading
 
 from .conftest import finite, ignore_gse_warnings

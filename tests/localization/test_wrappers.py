@@ -10,14 +10,13 @@ from gymnasium.utils.env_checker import check_env
 from sklearn.exceptions import NotFittedError
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-from localization.filters import PoseEKF, PoseMeasurement
+from localization.filtering.ekf import PoseEKF, PoseMeasurement
+from localization.geometry import cov_to_triu, triu_to_cov
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer
 from localization.wrappers import (
     BeliefWrapper,
     DeadReckoningWrapper,
     OracleWrapper,
-    cov_to_triu,
-    triu_to_cov,
 )
 
 from .conftest import make_env

@@ -1,0 +1,83 @@
+"""PixelPCA: raw pixels in [0, 1] -> PCA, the classical appearance-based baseline."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from localization.features._pca import fit_pca, pca_from_state, pca_state
+from localization.features.base import FeatureExtractor
+
+__all__ = ["PixelPCA"]
+
+
+class PixelPCA(FeatureExtractor):
+    """Raw pixels scaled to [0, 1] (optionally grey) -> PCA: the classical appearance baseline.
+
+    Parameters
+    ----------
+    n_components : int
+        PCA dimension m; clipped to min(n_samples, n_pixels) at fit time.
+    grayscale : bool
+        Use luminance (0.299 R + 0.587 G + 0.114 B) instead of the three channels.
+    whiten : bool
+        Scale components to unit variance.
+    random_state : int or None
+        Seed of the randomized SVD sklearn picks for large inputs.
+    mask : array_like of bool, shape (H, W), or None
+        Use only these pixels (e.g. those looking above the near ground, whose texture
+        moves fast and repeats); None uses all.
+
+    Attributes
+    ----------
+    pca_ : sklearn.decomposition.PCA
+        Fitted on vectors of H * W * (1 or 3) pixels.
+    image_shape_ : tuple of int
+        (H, W) seen in fit.
+    """
+
+    name = "pixel_pca"
+
+    def __init__(self, n_components: int = 64, grayscale: bool = False, whiten: bool = False,
+                 random_state: int | None = 0, mask: Any = None) -> None:
+        self.n_components = n_components
+        self.grayscale = grayscale
+        self.whiten = whiten
+        self.random_state = random_state
+        self.mask = mask
+
+    def _pixels(self, images: np.ndarray) -> np.ndarray:
+        if self.mask is not None:
+            mask = np.asarray(self.mask, dtype=bool)
+            if mask.shape != images.shape[1:3] or not mask.any():
+                raise ValueError(f"mask must be a non-empty boolean (H, W) = "
+                                 f"{images.shape[1:3]} array, got shape {mask.shape}")
+            images = images[:, mask]  # (n, n_pixels, 3)
+        x = images.astype(np.float32) / np.float32(255.0)
+        if self.grayscale:
+            x = x @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
+        return x.reshape(len(x), -1)
+
+    def _fit(self, images: np.ndarray, y: Any = None) -> None:
+        if int(self.n_components) < 1:
+            raise ValueError(f"n_components must be >= 1, got {self.n_components}")
+        self.pca_ = fit_pca(self._pixels(images), self.n_components, self.whiten,
+                            self.random_state)
+
+    def _transform(self, images: np.ndarray) -> np.ndarray:
+        out = np.empty((len(images), self._n_out()), dtype=np.float64)
+        for s in range(0, len(images), 1024):  # bounds the float64 temporaries of PCA
+            out[s:s + 1024] = self.pca_.transform(self._pixels(images[s:s + 1024]))
+        return out
+
+    def _state_arrays(self) -> dict[str, np.ndarray]:
+        return pca_state(self.pca_)
+
+    def _load_arrays(self, state: dict[str, np.ndarray]) -> None:
+        self.pca_ = pca_from_state(state, self.whiten)
+        if self.pca_ is None:
+            raise ValueError("PixelPCA state has no 'pca/components_'")
+
+    def _n_out(self) -> int:
+        return int(self.pca_.n_components_)

@@ -1,0 +1,227 @@
+"""BeliefFilter: the pose belief from appearance, one image at a time (no Gym inside).
+
+It runs :class:`~localization.filtering.ekf.PoseEKF` with an
+:class:`~localization.localizer.AppearanceLocalizer`: the prior of each step is
+``x = F(x, k U)``, ``P = F P F^T + Q(x)`` (``k`` the localizer's calibrated control
+gains), then the chosen measurement model updates it with the new image's features,
+unless the NIS gate rejects the measurement or the GSE maps have no value there (the
+image or the predicted pose lies outside the training domain).
+
+Recovery: a gate that rejects the truth keeps rejecting it (a sudden heading kick of
+0.2 rad against a belief sure to 0.03 rad lost the robot on a held-out city). From the
+``inflate_after``-th rejection in a row on, the heading variance (row and column of P) is
+multiplied by ``inflate_factor`` each step, up to a standard deviation of
+``MAX_HEADING_STD``, so the gate widens for a heading error until the measurements are
+accepted again. Only the heading: inflating the position too let a burst of aliased
+measurements through (one moved a belief 2.5 m sideways). An isolated outlier (e.g. a
+corrupted image) changes nothing. After ``relocalize_after`` steps in a row without an
+accepted measurement the belief restarts from psi* of the current image, as at the start.
+
+:class:`~localization.wrappers.BeliefWrapper` drives it from an env;
+:meth:`AppearanceLocalizer.fit_noise` runs it over a recorded drive to calibrate the noise.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from localization.filtering.ekf import OutOfDomainError, PoseEKF, UpdateResult
+from localization.geometry import Array
+
+
+class Localizer(Protocol):
+    """What the belief needs from a fitted localizer (e.g.
+    :class:`~localization.localizer.AppearanceLocalizer`): measurement models, the noise
+    model and an initial belief from one image's features."""
+
+    control_gain_: Any
+
+    def consistency(self, measurement: str) -> Array: ...
+    def measurement_model(self, measurement: str, alpha: ArrayLike | None = None) -> Any: ...
+    def process_noise(self, pose: ArrayLike, alpha: ArrayLike | None = None) -> Array: ...
+    def initial_belief(self, w: ArrayLike) -> tuple[Array, Array]: ...
+    def prior(self) -> tuple[Array, Array]: ...
+    def measure(self, w: ArrayLike, measurement: str) -> Array: ...
+
+
+STATUSES = ("initial", "accepted", "gated", "out_of_domain", "relocalized")
+MAX_HEADING_STD = 0.5  # rad: heading inflation stops there
+
+
+class BeliefFilter:
+    """EKF pose belief fed with image features.
+
+    Parameters
+    ----------
+    localizer : Localizer
+        Fitted, with its noise model (``fit_noise`` or ``fit_process_noise``).
+    motion_model : object
+        F: ``predict(x, u)``, ``jacobian_pose(x, u)`` (the env's ``motion_model``).
+    measurement : {"pose", "features", "representation"}
+    gate_probability : float or None
+        NIS gate (None: no gate).
+    relocalize_after : int or None
+        Consecutive steps without an accepted measurement before the belief restarts from
+        psi* (None: never).
+    inflate_after : int or None
+        Consecutive gated steps from which the heading variance is inflated (None: never).
+    inflate_factor : float
+        Factor of the heading variance per further gated step.
+    alpha : array_like (3,), optional
+        Body-frame covariance inflation (along, cross, heading) of Q, R and P0; default the
+        localizer's calibrated ``consistency_[measurement]``.
+
+    Attributes
+    ----------
+    ekf : PoseEKF or None
+        None before :meth:`reset`.
+    last_update : UpdateResult or None
+    """
+
+    def __init__(self, localizer: Localizer, motion_model: Any,
+                 measurement: str = "representation",
+                 gate_probability: float | None = 0.997, relocalize_after: int | None = 50,
+                 alpha: ArrayLike | None = None, inflate_after: int | None = 3,
+                 inflate_factor: float = 2.0) -> None:
+        if relocalize_after is not None and relocalize_after < 1:
+            raise ValueError(f"relocalize_after must be >= 1 or None, got {relocalize_after}")
+        if inflate_after is not None and inflate_after < 1:
+            raise ValueError(f"inflate_after must be >= 1 or None, got {inflate_after}")
+        if not inflate_factor >= 1.0:
+            raise ValueError(f"inflate_factor must be >= 1, got {inflate_factor}")
+        self.inflate_after, self.inflate_factor = inflate_after, float(inflate_factor)
+        self.localizer = localizer
+        self.motion_model = motion_model
+        self.measurement = measurement
+        self.gate_probability = gate_probability
+        self.relocalize_after = relocalize_after
+        self.alpha = localizer.consistency(measurement) if alpha is None else \
+            np.asarray(alpha, dtype=np.float64)
+        self.model = localizer.measurement_model(measurement, alpha=self.alpha)
+        self.gain = np.asarray(localizer.control_gain_, dtype=np.float64)
+        self.ekf: PoseEKF | None = None
+        self.last_update: UpdateResult | None = None
+        self.misses = 0
+        self.gated = 0
+
+    @property
+    def x(self) -> Array:
+        """Belief mean [x, y, yaw] (3,)."""
+        self._check()
+        return self.ekf.x.copy()  # type: ignore[union-attr]
+
+    @property
+    def P(self) -> Array:
+        """Belief covariance (3, 3)."""
+        self._check()
+        return self.ekf.P.copy()  # type: ignore[union-attr]
+
+    def _check(self) -> None:
+        if self.ekf is None:
+            raise RuntimeError("the belief is not initialised: call reset() first")
+
+    def _Q(self, x: Array, u: Array) -> Array:
+        return self.localizer.process_noise(x, alpha=self.alpha)
+
+    def _start(self, x0: ArrayLike, P0: ArrayLike) -> None:
+        self.ekf = PoseEKF(self.motion_model, self._Q, x0, P0,
+                           gate_probability=self.gate_probability)
+        self.misses = self.gated = 0
+
+    def _from_image(self, w: Array) -> bool:
+        x0, P0 = self.localizer.initial_belief(w)
+        if not np.all(np.isfinite(x0)):
+            return False
+        self._start(x0, P0)
+        return True
+
+    def reset(self, w: ArrayLike, x0: ArrayLike | None = None, P0: ArrayLike | None = None
+              ) -> str:
+        """Start the belief from the first image's features ``w`` (m,): psi*(w) with its
+        noise, or from ``x0``, ``P0`` when given (e.g. a known start for calibration).
+
+        If psi*(w) is out of domain the belief starts at the centre of the training poses
+        with their spread as covariance and relocalizes at the next in-domain image.
+
+        Returns
+        -------
+        status : "initial" or "out_of_domain"
+        """
+        self.last_update = None
+        if x0 is not None:
+            self._start(x0, P0 if P0 is not None else np.diag([0.01, 0.01, 0.001]))
+            return "initial"
+        if self._from_image(np.asarray(w, dtype=np.float64)):
+            return "initial"
+        mean, cov = self.localizer.prior()
+        self._start(mean, cov)
+        self.misses = self.relocalize_after or 0
+        return "out_of_domain"
+
+    def step(self, u: ArrayLike, w: ArrayLike) -> tuple[float, str]:
+        """Predict with the commanded control ``u`` (2,), update with the new features ``w``.
+
+        Returns
+        -------
+        nis : float
+            NaN when no NIS was computed (out of domain).
+        status : "accepted", "gated", "out_of_domain" or "relocalized"
+        """
+        self._check()
+        assert self.ekf is not None
+        self.ekf.predict(self.gain * np.asarray(u, dtype=np.float64))
+        w = np.asarray(w, dtype=np.float64)
+        nis, status = self._update(w)
+        self.gated = self.gated + 1 if status == "gated" else 0
+        if self.inflate_after is not None and self.gated >= self.inflate_after:
+            P = self.ekf.P
+            f = min(self.inflate_factor, MAX_HEADING_STD ** 2 / P[2, 2])
+            if f > 1.0:
+                d = np.array([1.0, 1.0, np.sqrt(f)])
+                self.ekf.P = d[:, None] * P * d[None, :]
+        if status == "accepted":
+            self.misses = 0
+        else:
+            self.misses += 1
+            if (self.relocalize_after is not None and self.misses >= self.relocalize_after
+                    and self._from_image(w)):
+                status = "relocalized"
+        return nis, status
+
+    def _update(self, w: Array) -> tuple[float, str]:
+        assert self.ekf is not None
+        z = self.localizer.measure(w, self.measurement)
+        if not np.all(np.isfinite(z)):
+            return np.nan, "out_of_domain"
+        try:
+            self.last_update = self.ekf.update(z, self.model)
+        except OutOfDomainError:
+            return np.nan, "out_of_domain"
+        return self.last_update.nis, "accepted" if self.last_update.accepted else "gated"
+
+    def run(self, W: ArrayLike, controls: ArrayLike, x0: ArrayLike | None = None,
+            P0: ArrayLike | None = None) -> tuple[Array, Array, list[str]]:
+        """Filter a recorded sequence: features ``W`` (n + 1, m) of frames 0..n and the
+        controls (n, 2) between them.
+
+        Returns
+        -------
+        means : (n + 1, 3)
+        covs : (n + 1, 3, 3)
+        statuses : list of n + 1 str
+        """
+        W = np.asarray(W, dtype=np.float64)
+        controls = np.asarray(controls, dtype=np.float64)
+        if len(W) != len(controls) + 1:
+            raise ValueError(f"need one more frame than controls, got {len(W)} and "
+                             f"{len(controls)}")
+        statuses = [self.reset(W[0], x0, P0)]
+        means, covs = [self.x], [self.P]
+        for u, w in zip(controls, W[1:]):
+            statuses.append(self.step(u, w)[1])
+            means.append(self.x)
+            covs.append(self.P)
+        return np.array(means), np.array(covs), statuses

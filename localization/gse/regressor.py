@@ -1,0 +1,421 @@
+"""Regression on an unknown input manifold with GSE (spec gse.md section 3).
+
+GSE is fitted on ``Z = (standardised w, scaled theta)``; the representation maps
+``r(w)`` and ``R(theta)`` are extended off the sample by Jacobian Regression and
+composed with the recovery map: ``psi*(w) = g_v(r*(w))``, ``Phi*(theta) = g_u(R*(theta))``.
+
+A periodic pose column (yaw) enters Z as a (cos, sin) pair of radius
+``theta_scale`` (so Z-space neighbourhoods see the true geometry), and the GSE
+graph is cut open at yaw = +-pi: a closed loop cannot be embedded by the
+least-squares step of spec 2.5 (spec section 9). The same holds for a closed loop
+traced by the positions (a robot driving around a block, as in the paper's
+experiment): ``loop_cut="auto"`` detects it (:func:`~localization.gse.graph.loop_coordinate`)
+and cuts it at one place. Every kernel average keeps only the neighbours on the
+nearest neighbour's side of every cut.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+from sklearn.base import BaseEstimator
+from sklearn.utils.validation import check_is_fitted
+
+from localization.geometry import wrap_angle
+from localization.gse.embedding import GrassmannStiefelEigenmaps
+from localization.gse.graph import (
+    Array,
+    brute_knn,
+    check_2d,
+    cuts_keep_connected,
+    knn_graph,
+    local_pca,
+    loop_coordinate,
+    same_side,
+)
+from localization.gse.io import load_regressor, save_regressor
+from localization.gse.jacobian_regression import (
+    AGREEMENT_GRID,
+    BANDWIDTH_GRID,
+    gaussian_jr,
+    loo_bandwidth,
+)
+from localization.gse.pose_block import PoseBlockMixin
+
+__all__ = ["GSERegressor", "pinv_blocks"]
+
+
+def pinv_blocks(H: Array, ridge: float = 0.0) -> Array:
+    """``(H^T H + ridge I)^{-1} H^T`` for a batch (n, a, b) -> (n, b, a), by q x q solves."""
+    HtH = np.swapaxes(H, 1, 2) @ H + ridge * np.eye(H.shape[2])
+    return np.linalg.solve(HtH, np.swapaxes(H, 1, 2))
+
+
+class GSERegressor(PoseBlockMixin, BaseEstimator):
+    """GSE regression between features w (n, m) and poses theta (n, d).
+
+    Parameters
+    ----------
+    n_components : int or None, default=None
+        Intrinsic dimension q; None = number of Theta columns.
+    n_neighbors : int, default=20
+        Neighbourhood size of GSE and of every kernel average.
+    periodic : tuple of int, default=()
+        Angle columns of Theta (radians); at most one.
+    theta_scale : "auto", float or array of shape (d,), default="auto"
+        Factor lambda applied to theta in Z; "auto" = median of |dw| / |dtheta| over
+        feature-space neighbours, so pose and feature variation in a neighbourhood
+        are comparable (and a disconnected feature sample is not bridged by poses).
+    bandwidth : "auto" or float, default="auto"
+        GSE heat-kernel bandwidth (see :class:`GrassmannStiefelEigenmaps`).
+    grassmann_kernel : str, default="binet_cauchy"
+    project_features : bool, default=False
+        Use ``G_r = G_u^- pi_W`` with pi_W from local PCA of the w-sample.
+    ridge : float, default=0.0
+        Tikhonov term for ``G_v^{-1}``.
+    bandwidth_grid : tuple of float
+        Relative grid for the leave-one-out JR bandwidths.
+    out_of_domain : {"raise", "nan", "ignore"}, default="raise"
+        Queries whose kernel sum is negligible: raise, NaN, or the estimate anyway.
+    random_state : int, default=0
+    theta_scale_factor : float, default=2.0
+        With theta_scale="auto": lambda_c = factor x median |dw/dtheta_c| (pose columns
+        then weigh a bit more than features, which keeps cond(G_v) near 1).
+    jr_neighbors : int or None, default=None
+        Neighbours of the two Jacobian regressions (None: n_neighbors).
+    kernel_grassmann : bool, default=False
+        Multiply K_W by the Binet-Cauchy factor between the local PCA tangent of the
+        w-sample at the query and Span(G_u) at the sample (spec 3.2). The factor is not
+        differentiated: embed_jacobian then ignores its (small) derivative.
+    loop_cut : {"auto", "none"}, default="auto"
+        "auto": if the linear (position) columns of Theta trace a closed loop, cut it
+        open at one place (angle in ``loop_angle_``), like the yaw cut; unless the
+        yaw cut already opens it (a heading that turns once along the loop: the pose
+        graph would fall apart with both cuts). Needed when
+        ``n_components`` is smaller than the loop's embedding needs (a closed route
+        with n_components=1).
+    adaptive_bandwidth : bool, default=False
+        Sample-point adaptive kernels of r* and R*: training point j gets the bandwidth
+        ``bandwidth_w_ x w_radius_[j]`` (its distance to its jr_neighbors-th
+        feature-space neighbour; ``bandwidth_theta_ x theta_radius_[j]`` in pose
+        space), so sparsely sampled stretches (a robot turning: images change fast;
+        gaps along a route) keep kernel support. The bandwidths are then LOO factors.
+    agreement : None, "auto" or float, default=None
+        Robust r*: weight each neighbour also by the agreement of its first-order
+        prediction ``y_j + G_r (w - w_j)`` with the densest group of predictions
+        (:func:`~localization.gse.jacobian_regression.agreement_factor`), with scale
+        ``tau = agreement x`` the median y-distance to the jr_neighbors-th neighbour.
+        Look-alike places among the feature-space neighbours then drop out. "auto":
+        choose the factor (or none) with the bandwidth by leave-one-out.
+
+    Attributes
+    ----------
+    gse_ : GrassmannStiefelEigenmaps
+    embedding_ : ndarray of shape (n, q)
+    theta_scale_ : ndarray of shape (d,)
+    bandwidth_w_, bandwidth_theta_ : float
+        LOO bandwidths of r* (standardised w units, or a factor of ``w_radius_`` with
+        adaptive_bandwidth) and R* (scaled theta units).
+    agreement_ : float or None
+        tau of the agreement factor of r* (None: off).
+    w_radius_, theta_radius_ : ndarray of shape (n,)
+        Distance of each sample to its jr_neighbors-th neighbour in feature space
+        (standardised) and in pose space (scaled).
+    pose_condition_ : ndarray of shape (n,)
+        cond(G_v) at the samples.
+    loop_angle_ : ndarray of shape (n,) or None
+        Angle along the detected position loop (None: no loop, or loop_cut="none").
+    cut_ : ndarray of shape (n, c) or None
+        All cut coordinates (periodic columns, then the loop angle).
+    """
+
+    def __init__(self, n_components: int | None = None, n_neighbors: int = 20,
+                 periodic: tuple[int, ...] = (), theta_scale: float | str | Array = "auto",
+                 bandwidth: float | str = "auto", grassmann_kernel: str = "binet_cauchy",
+                 project_features: bool = False, ridge: float = 0.0,
+                 bandwidth_grid: tuple[float, ...] = BANDWIDTH_GRID,
+                 out_of_domain: str = "raise", random_state: int = 0,
+                 theta_scale_factor: float = 2.0, jr_neighbors: int | None = None,
+                 kernel_grassmann: bool = False, loop_cut: str = "auto",
+                 adaptive_bandwidth: bool = False, agreement: float | str | None = None) -> None:
+        self.n_components = n_components
+        self.n_neighbors = n_neighbors
+        self.periodic = periodic
+        self.theta_scale = theta_scale
+        self.bandwidth = bandwidth
+        self.grassmann_kernel = grassmann_kernel
+        self.project_features = project_features
+        self.ridge = ridge
+        self.bandwidth_grid = bandwidth_grid
+        self.out_of_domain = out_of_domain
+        self.random_state = random_state
+        self.theta_scale_factor = theta_scale_factor
+        self.jr_neighbors = jr_neighbors
+        self.kernel_grassmann = kernel_grassmann
+        self.loop_cut = loop_cut
+        self.adaptive_bandwidth = adaptive_bandwidth
+        self.agreement = agreement
+
+    # --------------------------------------------------------------------- fit
+    def fit(self, W: Array, Theta: Array) -> GSERegressor:
+        """Fit on features ``W`` (n, m) and poses ``Theta`` (n, d)."""
+        W, Theta = check_2d(W, "W"), check_2d(Theta, "Theta")
+        if W.shape[0] != Theta.shape[0]:
+            raise ValueError(f"W has {W.shape[0]} rows but Theta has {Theta.shape[0]}")
+        (n, m), d = W.shape, Theta.shape[1]
+        self._per = self._periodic(d)
+        if self.loop_cut not in ("auto", "none"):
+            raise ValueError(f"loop_cut must be 'auto' or 'none', got {self.loop_cut!r}")
+        if not (self.agreement in (None, "auto") or (
+                isinstance(self.agreement, (int, float)) and self.agreement > 0)):
+            raise ValueError(f"agreement must be None, 'auto' or a positive number, got "
+                             f"{self.agreement!r}")
+        q = d if self.n_components is None else self.n_components
+        k = self.n_neighbors
+        if n <= k + 1:
+            raise ValueError(f"need more samples than n_neighbors + 1: n={n}, n_neighbors={k}")
+        Theta = Theta.copy()
+        for c in self._per:
+            Theta[:, c] = wrap_angle(Theta[:, c])
+        self.w_mean_ = W.mean(axis=0)
+        self.w_scale_ = float(np.sqrt(W.var(axis=0).mean()))
+        if not self.w_scale_ > 0:
+            raise ValueError("W is constant: features carry no information")
+        Ws = (W - self.w_mean_) / self.w_scale_
+        self.theta_center_ = np.where(np.isin(np.arange(d), self._per), 0.0, Theta.mean(axis=0))
+        dist_w, ind_w = knn_graph(Ws, k)
+        if isinstance(self.theta_scale, str):
+            if self.theta_scale != "auto":
+                raise ValueError(f"theta_scale must be 'auto' or numbers, got {self.theta_scale!r}")
+            self.theta_scale_ = self.theta_scale_factor * self._auto_scale(Ws, Theta, ind_w)
+        else:
+            self.theta_scale_ = np.broadcast_to(np.asarray(self.theta_scale, float), (d,)).copy()
+        if not np.all(self.theta_scale_ > 0):
+            raise ValueError(f"theta_scale must be positive, got {self.theta_scale_}: with "
+                             "theta_scale='auto' a zero means the features do not vary with "
+                             "that Theta column (drop it or pass theta_scale explicitly)")
+        self.theta_ = Theta
+        lin = [c for c in range(d) if c not in self._per]
+        self.loop_angle_ = (loop_coordinate(Theta[:, lin], k, seed=self.random_state)
+                            if self.loop_cut == "auto" and lin else None)
+        if self.loop_angle_ is not None and self._per and not cuts_keep_connected(
+                self._lift(Theta), np.column_stack([Theta[:, self._per], self.loop_angle_]), k):
+            self.loop_angle_ = None  # the heading wraps once along the loop: its cut opens it
+        cuts = [Theta[:, c] for c in self._per] + (
+            [self.loop_angle_] if self.loop_angle_ is not None else [])
+        self.cut_ = np.column_stack(cuts) if cuts else None
+        Z = np.column_stack([Ws, self._lift(Theta)])
+        self.gse_ = GrassmannStiefelEigenmaps(
+            q, n_neighbors=k, bandwidth=self.bandwidth, grassmann_kernel=self.grassmann_kernel,
+            out_of_domain=self.out_of_domain, random_state=self.random_state)
+        self.gse_.fit(Z, cut=self.cut_)
+        self.gse_.select_recovery_bandwidth()
+        H = self.gse_.frames_
+        self.Gr_ = pinv_blocks(H[:, :m, :])
+        Bq, _ = np.linalg.qr(H[:, :m, :])
+        self._w_tangents = Bq
+        if self.project_features:
+            w = np.exp(-0.5 * (dist_w / (0.5 * np.median(dist_w[:, -1]))) ** 2)
+            U = local_pca(Ws, Ws, ind_w, w, q)
+            self.Gr_ = (self.Gr_ @ U) @ np.swapaxes(U, 1, 2)
+        Hv = H[:, m:, :]
+        self.GR_ = pinv_blocks(Hv, self.ridge) @ self._dlift(Theta)
+        s = np.linalg.svd(Hv, compute_uv=False)
+        self.pose_condition_ = s[:, 0] / np.maximum(s[:, -1], np.finfo(float).tiny)
+        self._setup()
+        self._select_bandwidths(Ws, Theta, dist_w, ind_w)
+        return self
+
+    def _select_bandwidths(self, Ws: Array, Theta: Array, dist_w: Array, ind_w: Array) -> None:
+        """Leave-one-out bandwidths (and agreement scale) of the two Jacobian regressions
+        r* (features) and R* (poses)."""
+        n, k = len(Ws), self.n_neighbors
+        y = self.embedding_
+        self.jr_neighbors_ = kj = min(self.jr_neighbors or k, n - 2)
+        if kj != k:
+            d2, ind_w = brute_knn(Ws, self._ws_sqn, Ws, kj + 1)
+            ind_w, dist_w = ind_w[:, 1:], np.sqrt(d2[:, 1:])
+        mask = self._mask(ind_w)
+        grid = np.asarray(self.bandwidth_grid)
+        self._pca_bw = 0.5 * float(np.median(dist_w[:, -1]))
+        self.w_radius_ = dist_w[:, -1].copy()
+        y_radius = float(np.median(cKDTree(y).query(y, k=kj + 1)[0][:, -1]))
+        taus = {"auto": (None, *AGREEMENT_GRID), None: (None,)}.get(self.agreement,  # type: ignore[call-overload]
+                                                                    (self.agreement,))
+        best = (np.inf, 0.0, None)
+        for a in taus:
+            tau = None if a is None else float(a) * y_radius
+            bw, mse = loo_bandwidth(
+                Ws[:, None, :] - Ws[ind_w], y[ind_w], self.Gr_[ind_w], y,
+                grid if self.adaptive_bandwidth else grid * np.median(dist_w[:, -1]), mask,
+                self._w_factor(Ws, ind_w), self.w_radius_[ind_w] if self.adaptive_bandwidth
+                else None, tau)
+            best = min(best, (float(mse.min()), bw, tau), key=lambda t: t[0])
+        _, self.bandwidth_w_, self.agreement_ = best
+        _, ind_t = self._zv_tree.query(self._zv, k=kj + 1)
+        ind_t = ind_t[:, 1:]
+        dX = self._pose_diff(Theta, Theta[ind_t])
+        mask = self._mask(ind_t)
+        self.theta_radius_ = np.linalg.norm(dX[:, -1], axis=1)
+        ad = self.adaptive_bandwidth
+        self.bandwidth_theta_, _ = loo_bandwidth(
+            dX, y[ind_t], self.GR_[ind_t], y,
+            grid if ad else grid * np.median(self.theta_radius_), mask, None,
+            self.theta_radius_[ind_t] if ad else None)
+
+    def _setup(self) -> None:
+        """Derived per-sample query structures (after fit or load)."""
+        m = len(self.w_mean_)
+        self._ws = np.ascontiguousarray(self.gse_.Z_[:, :m])  # contiguous: fast GEMM queries
+        self._ws_sqn = (self._ws ** 2).sum(axis=1)
+        self._ws_tree = cKDTree(self._ws)
+        self._zv = np.ascontiguousarray(self.gse_.Z_[:, m:])
+        self._zv_tree = cKDTree(self._zv)  # pose space is low-dimensional
+        self.embedding_ = self.gse_.embedding_
+
+    # ----------------------------------------------------------------- predict
+    def _check(self, X: Array, name: str, n_cols: str) -> Array:
+        check_is_fitted(self, "gse_")
+        return check_2d(X, name, len(getattr(self, n_cols)))
+
+    def _flag(self, log_sum: Array, what: str, *outs: Array) -> None:
+        bad = log_sum < np.log(self.gse_.min_kernel_sum)
+        if bad.any() and self.out_of_domain != "ignore":
+            if self.out_of_domain == "raise":
+                raise ValueError(f"{bad.sum()} {what} row(s) are outside the training domain "
+                                 f"(kernel sum < {self.gse_.min_kernel_sum:g}), first row "
+                                 f"{int(np.flatnonzero(bad)[0])}")
+            for o in outs:
+                if o is not None:
+                    o[bad] = np.nan
+
+    def _mask(self, ind: Array) -> Array | None:
+        """Neighbours (n, k) on the nearest neighbour's side of every cut, or None."""
+        return None if self.cut_ is None else same_side(self.cut_[ind])
+
+    def _w_factor(self, Ws: Array, ind: Array) -> Array | None:
+        """log Binet-Cauchy factor of K_W (n, k), or None when kernel_grassmann is off."""
+        if not self.kernel_grassmann:
+            return None
+        d2 = ((Ws[:, None, :] - self._ws[ind]) ** 2).sum(axis=2)
+        L = local_pca(self._ws, Ws, ind, np.exp(-0.5 * d2 / self._pca_bw ** 2),
+                      self.embedding_.shape[1])
+        S = np.einsum("nma,nkmb->nkab", L, self._w_tangents[ind])
+        with np.errstate(divide="ignore"):
+            return np.log(np.linalg.det(S) ** 2)
+
+    def _r_star(self, W: Array, jacobian: bool) -> tuple[Array, Array | None]:
+        W = self._check(W, "W", "w_mean_")
+        Ws = (W - self.w_mean_) / self.w_scale_
+        if len(Ws) <= 32:  # single queries: a KD-tree beats a GEMM over all samples
+            ind = np.asarray(self._ws_tree.query(Ws, k=self.jr_neighbors_)[1]).reshape(len(Ws), -1)
+        else:
+            ind = brute_knn(self._ws, self._ws_sqn, Ws, self.jr_neighbors_)[1]
+        mask = self._mask(ind)
+        bw = self.bandwidth_w_ * self.w_radius_[ind] if self.adaptive_bandwidth else self.bandwidth_w_
+        r, J, log_sum = gaussian_jr(Ws[:, None, :] - self._ws[ind], self.embedding_[ind],
+                                    self.Gr_[ind], bw, mask, jacobian,
+                                    self._w_factor(Ws, ind), self.agreement_)
+        if J is not None:
+            J /= self.w_scale_
+        self._flag(log_sum, "W", r, J)
+        return r, J
+
+    def _R_star(self, Theta: Array, jacobian: bool) -> tuple[Array, Array | None]:
+        Theta = self._check(Theta, "Theta", "theta_scale_").copy()
+        for c in self._per:
+            Theta[:, c] = wrap_angle(Theta[:, c])
+        _, ind = self._zv_tree.query(self._lift(Theta), k=self.jr_neighbors_)
+        ind = np.asarray(ind).reshape(len(Theta), -1)
+        mask = self._mask(ind)
+        bw = (self.bandwidth_theta_ * self.theta_radius_[ind] if self.adaptive_bandwidth
+              else self.bandwidth_theta_)
+        R, J, log_sum = gaussian_jr(self._pose_diff(Theta, self.theta_[ind]), self.embedding_[ind],
+                                    self.GR_[ind], bw, mask, jacobian)
+        if J is not None:
+            J *= self.theta_scale_
+        self._flag(log_sum, "Theta", R, J)
+        return R, J
+
+    def embed(self, W: Array) -> Array:
+        """r*(w): representation of features, shape (n, q)."""
+        return self._r_star(W, False)[0]
+
+    def embed_jacobian(self, W: Array) -> Array:
+        """Exact d r*/dw in original feature units, shape (n, q, m)."""
+        return self._r_star(W, True)[1]
+
+    def embed_pose(self, Theta: Array) -> Array:
+        """R*(theta): representation of poses, shape (n, q)."""
+        return self._R_star(Theta, False)[0]
+
+    def embed_pose_jacobian(self, Theta: Array) -> Array:
+        """Exact d R*/dtheta (angles in radians), shape (n, q, d)."""
+        return self._R_star(Theta, True)[1]
+
+    def _recover(self, Y: Array, cols: slice, jacobian: bool = False
+                 ) -> tuple[Array, Array | None]:
+        """g(Y) on ambient columns ``cols``; rows of Y that are NaN (out of domain with
+        ``out_of_domain="nan"``) stay NaN instead of reaching the KD-tree."""
+        ok = np.all(np.isfinite(Y), axis=1)
+        if ok.all():
+            g, J, _ = self.gse_._recover(Y, cols, jacobian)
+            return g, J
+        p = len(range(*cols.indices(self.gse_.Z_.shape[1])))
+        g = np.full((len(Y), p), np.nan)
+        J = np.full((len(Y), p, Y.shape[1]), np.nan) if jacobian else None
+        if ok.any():
+            g[ok], Jok, _ = self.gse_._recover(Y[ok], cols, jacobian)
+            if J is not None:
+                J[ok] = Jok
+        return g, J
+
+    def predict(self, W: Array) -> Array:
+        """psi*(w) = g_v(r*(w)): poses (n, d), angles wrapped to (-pi, pi]."""
+        r, _ = self._r_star(W, False)
+        zv, _ = self._recover(r, slice(len(self.w_mean_), None))
+        return self._unlift(zv)
+
+    def predict_features(self, Theta: Array) -> Array:
+        """Phi*(theta) = g_u(R*(theta)): features (n, m) in original units."""
+        R, _ = self._R_star(Theta, False)
+        gu, _ = self._recover(R, slice(0, len(self.w_mean_)))
+        return gu * self.w_scale_ + self.w_mean_
+
+    def reconstruct(self, W: Array) -> Array:
+        """Reduce-then-recover ``g_u(r*(w))``: features (n, m) rebuilt from their
+        q-dimensional representation (the paper's Fig. 2), original units."""
+        r, _ = self._r_star(W, False)
+        gu, _, _ = self.gse_._recover(r, slice(0, len(self.w_mean_)))
+        return gu * self.w_scale_ + self.w_mean_
+
+    def feature_tangents(self, W: Array) -> Array:
+        """Tangent vectors of the feature manifold at ``g_u(r*(w))``: the feature block
+        ``G_u`` of the recovery Jacobian field (spec 2.7), shape (n, m, q), original units
+        per unit of representation (the paper's Fig. 3)."""
+        r, _ = self._r_star(W, False)
+        out = np.full((len(r), len(self.w_mean_), r.shape[1]), np.nan)
+        ok = np.isfinite(r).all(axis=1)
+        if ok.any():
+            out[ok] = self.gse_.recovery_jacobian(r[ok])[:, :len(self.w_mean_), :]
+        return out * self.w_scale_
+
+    def features_jacobian(self, Theta: Array) -> Array:
+        """Exact dPhi*/dtheta (n, m, d) in original units (angles in radians): EKF's H."""
+        R, JR = self._R_star(Theta, True)
+        _, Jg = self._recover(R, slice(0, len(self.w_mean_)), jacobian=True)
+        return self.w_scale_ * (Jg @ JR)
+
+    # --------------------------------------------------------------- persistence
+    def save(self, path: str | Path) -> None:
+        """Save to ``.npz`` (no pickles; settings as a JSON string)."""
+        check_is_fitted(self, "gse_")
+        save_regressor(self, path)
+
+    @classmethod
+    def load(cls, path: str | Path) -> GSERegressor:
+        """Load a model written by :meth:`save`; ValueError if corrupt or incomplete."""
+        return load_regressor(cls, path)
+

@@ -1,0 +1,219 @@
+"""Closed-loop tracking: fit a localizer for a city, drive its route on the belief, score it.
+
+Shared by ``scripts/track.py``, ``scripts/demo.py``, ``scripts/bench_filter.py`` and the tests.
+
+- :func:`fit_city_localizer`: the whole fit on one city: images around the driving lanes
+  (``envs.collect_dataset(mode="lanes")``), :meth:`AppearanceLocalizer.fit`, a drive on the
+  true pose for the process and measurement noise (:meth:`AppearanceLocalizer.fit_noise`)
+  and a first consistency calibration (:meth:`AppearanceLocalizer.calibrate`), then a drive
+  on that belief (closed loop, "representation" model) on which the calibration is refined:
+  in closed loop the robot follows the belief's errors, which the true-pose drive does not
+  show. The drives go where the training lanes go: around the route (``lanes="route"``) or
+  along random tours of all the streets, both ways (``lanes="streets"``).
+- :func:`track_route` / :func:`track_streets`: drive ``steps`` steps along the route / a
+  random street tour with a pure-pursuit controller on the belief mean
+  (:class:`~localization.wrappers.BeliefWrapper`), and dead-reckon the same commanded
+  controls from the true start pose (F alone).
+- :func:`track_metrics`: position RMSE of the belief and of dead reckoning, their ratio,
+  heading RMSE, mean NEES and NIS, measurement acceptance.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2
+
+from envs.datasets import PurePursuit, collect_dataset, drive_route, drive_streets
+from envs.lanes import street_tour
+from localization.geometry import Array, wrap_angle
+from localization.localizer import MEASUREMENTS, AppearanceLocalizer
+from localization.wrappers import BeliefWrapper
+
+
+@dataclass
+class TrackResult:
+    """One closed-loop run of ``steps`` steps (arrays have ``steps + 1`` rows: frame 0 is the
+    reset). ``dead_reckoning`` is F alone from the true start pose with the same controls."""
+
+    measurement: str
+    true: Array
+    mean: Array
+    cov: Array
+    dead_reckoning: Array
+    controls: Array
+    nis: Array
+    nis_dof: int
+    nees: Array
+    status: list[str]
+    seconds_per_step: float
+    images: NDArray[np.uint8] | None = field(default=None, repr=False)
+
+
+def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
+                       n_drive: int = 1500, seed: int = 0,
+                       localizer_params: dict[str, Any] | None = None,
+                       lane_options: dict[str, Any] | None = None,
+                       calibrate_on_belief: bool = True,
+                       measurements: tuple[str, ...] = MEASUREMENTS, progress: bool = False,
+                       ) -> tuple[AppearanceLocalizer, dict[str, float]]:
+    """Fit an :class:`AppearanceLocalizer` and its noise model on the env's city.
+
+    Parameters
+    ----------
+    env : an AppearanceNav env (its motion noise is the one the noise model learns).
+    n_train : int
+        Training images around the lanes.
+    lanes : {"route", "streets"}
+        Lanes of the training images (see :mod:`envs.lanes`).
+    n_drive : int
+        Steps of each noise drive (around the route for ``lanes="route"``, along random
+        street tours for ``lanes="streets"``).
+    seed : int
+        Seeds the training poses and the drives (drive seeds ``seed + 1``, ``seed + 2``).
+    localizer_params : dict, optional
+        Keyword arguments of :class:`AppearanceLocalizer` (default ``noise_folds=0``: R comes
+        from the drives).
+    lane_options : dict, optional
+        Extra options of the "lanes" dataset (``lateral``, ``heading``, ...).
+    calibrate_on_belief : bool
+        After calibrating the consistency on the true-pose drive, refine it on a drive on
+        that belief (closed loop, "representation" model).
+    measurements : tuple of str
+        Models whose consistency is calibrated.
+    progress : bool
+
+    Returns
+    -------
+    localizer : AppearanceLocalizer
+    seconds : dict
+        Wall time of each stage ("collect", "fit", "noise").
+    """
+    seconds = {}
+    t0 = time.perf_counter()
+    images, poses = collect_dataset(env, n_train, "lanes", seed=seed, progress=progress,
+                                    lanes=lanes, **(lane_options or {}))
+    seconds["collect"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    loc = AppearanceLocalizer(**{"noise_folds": 0, **(localizer_params or {})})
+    loc.fit(images, poses, camera=getattr(env.unwrapped, "camera_name", None))
+    seconds["fit"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    fit_city_noise(env, loc, lanes, n_drive, seed, calibrate_on_belief, measurements, progress)
+    seconds["noise"] = time.perf_counter() - t0
+    return loc, seconds
+
+
+def fit_city_noise(env: gym.Env, localizer: AppearanceLocalizer, lanes: str = "route",
+                   n_drive: int = 1500, seed: int = 0, calibrate_on_belief: bool = True,
+                   measurements: tuple[str, ...] = MEASUREMENTS, progress: bool = False,
+                   ) -> AppearanceLocalizer:
+    """The noise stage of :func:`fit_city_localizer` for a fitted localizer (same arguments):
+    noise from a drive on the true pose (seed ``seed + 1``), consistency calibrated on it
+    and then on a drive on the belief (seed ``seed + 2``)."""
+    if lanes not in ("route", "streets"):
+        raise ValueError(f"unknown lanes {lanes!r}; choose 'route' or 'streets'")
+    motion_model = env.unwrapped.motion_model
+    streets = lanes == "streets"
+    drive = drive_streets if streets else drive_route
+    images, poses, controls = drive(env, n_drive, seed=seed + 1, progress=progress)
+    localizer.fit_noise(motion_model, images, poses, controls)
+    localizer.calibrate(motion_model, images, poses, controls, measurements)
+    if calibrate_on_belief:
+        track = track_streets if streets else track_route
+        run = track(env, localizer, "representation", n_drive, seed=seed + 2, keep_images=True)
+        localizer.calibrate(motion_model, run.images, run.true, run.controls, measurements)
+    return localizer
+
+
+def track_route(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
+                steps: int, start: int = 0, seed: int = 0, keep_images: bool = False,
+                **wrapper_options: Any) -> TrackResult:
+    """Drive ``steps`` steps along the city's route on the belief mean.
+
+    The robot starts on the route's path point ``start`` (``PurePursuit.path``), heading
+    along it; :class:`PurePursuit` steers on the belief mean (never on the true pose).
+    ``wrapper_options`` go to :class:`BeliefWrapper`.
+    """
+    base = env.unwrapped
+    pilot = PurePursuit(base.city.route(), w_max=base.W_MAX)
+    return _track(env, localizer, measurement, pilot, pilot.start_pose(start), steps, seed,
+                  keep_images, wrapper_options)
+
+
+def track_streets(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
+                  steps: int, seed: int = 0, keep_images: bool = False,
+                  speed: float = 0.6, **wrapper_options: Any) -> TrackResult:
+    """Drive ``steps`` steps along a random tour of the streets (``envs.lanes.street_tour``
+    drawn from ``seed``) on the belief mean, from the tour's first intersection."""
+    base = env.unwrapped
+    tour = street_tour(base.city, 1.5 * steps * base.dt * speed + 10.0,
+                       np.random.default_rng(seed))
+    pilot = PurePursuit(tour, speed=speed, w_max=base.W_MAX, closed=False)
+    return _track(env, localizer, measurement, pilot, pilot.start_pose(0), steps, seed,
+                  keep_images, wrapper_options)
+
+
+def _track(env: gym.Env, localizer: AppearanceLocalizer, measurement: str, pilot: PurePursuit,
+           start: Array, steps: int, seed: int, keep_images: bool,
+           wrapper_options: dict[str, Any]) -> TrackResult:
+    if measurement not in MEASUREMENTS:
+        raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
+    base = env.unwrapped
+    wrapped = BeliefWrapper(env, localizer, measurement, keep_image=keep_images,
+                            **wrapper_options)
+    obs, info = wrapped.reset(seed=seed, options={"pose": start})
+    rows = {"true": [info["pose"]], "mean": [wrapped.mean], "cov": [wrapped.cov],
+            "nis": [info["nis"]], "nees": [info["nees"]]}
+    status, controls, images = [info["measurement_status"]], [], [obs.get("image")]
+    dr = [info["pose"].copy()]
+    space = env.action_space
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        u = np.clip(pilot(obs["pose_mean"].astype(np.float64)), space.low, space.high)
+        obs, _, _, _, info = wrapped.step(u)
+        controls.append(u)
+        dr.append(base.motion_model.predict(dr[-1], localizer.control_gain_ * u))
+        for k, v in (("true", info["pose"]), ("mean", wrapped.mean), ("cov", wrapped.cov),
+                     ("nis", info["nis"]), ("nees", info["nees"])):
+            rows[k].append(v)
+        status.append(info["measurement_status"])
+        images.append(obs.get("image"))
+    seconds = (time.perf_counter() - t0) / max(steps, 1)
+    return TrackResult(measurement, *(np.array(rows[k]) for k in ("true", "mean", "cov")),
+                       np.array(dr), np.array(controls, dtype=np.float64).reshape(-1, 2),
+                       np.array(rows["nis"], dtype=np.float64), info["nis_dof"],
+                       np.array(rows["nees"], dtype=np.float64), status, seconds,
+                       np.array(images) if keep_images else None)
+
+
+def nees_band(n_runs: int, prob: float = 0.95, dof: int = 3) -> tuple[float, float]:
+    """Two-sided band of the mean of ``n_runs`` run-averaged NEES values.
+
+    Each run's time-averaged NEES counts as one chi2(dof) draw: the steps of one run are
+    strongly correlated (the error changes over tens of steps), so they are not independent
+    samples. The band is ``chi2.ppf([(1 - prob) / 2, (1 + prob) / 2], n_runs dof) / n_runs``.
+    """
+    lo, hi = chi2.ppf([(1.0 - prob) / 2.0, (1.0 + prob) / 2.0], n_runs * dof) / n_runs
+    return float(lo), float(hi)
+
+
+def track_metrics(run: TrackResult) -> dict[str, float]:
+    """Scores of one run (positions in metres, headings in radians)."""
+    err = np.hypot(*(run.mean[:, :2] - run.true[:, :2]).T)
+    dr = np.hypot(*(run.dead_reckoning[:, :2] - run.true[:, :2]).T)
+    yaw = wrap_angle(run.mean[:, 2] - run.true[:, 2])
+    rmse, rmse_dr = float(np.sqrt(np.mean(err ** 2))), float(np.sqrt(np.mean(dr ** 2)))
+    status = np.array(run.status[1:])
+    return {"steps": len(run.true) - 1, "rmse": rmse, "rmse_dead_reckoning": rmse_dr,
+            "ratio": rmse / rmse_dr if rmse_dr > 0 else float("nan"),
+            "final_error": float(err[-1]), "final_error_dead_reckoning": float(dr[-1]),
+            "max_error": float(err.max()), "yaw_rmse": float(np.sqrt(np.mean(yaw ** 2))),
+            "nees_mean": float(np.mean(run.nees)), "nis_mean": float(np.nanmean(run.nis)),
+            "nis_dof": run.nis_dof, "accepted": float(np.mean(status == "accepted")),
+            "ms_per_step": 1e3 * run.seconds_per_step}
