@@ -15,7 +15,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.planner import PlannedPath, StreetPlanner
-from localization.geometry import Array, wrap_angle
+from envs.driving import bearing, pursuit_turn_rate
+from localization.geometry import Array
 
 __all__ = ["BELIEF_KEYS", "Navigator", "ScriptedAgent", "check_belief_observation",
            "pure_pursuit"]
@@ -61,12 +62,12 @@ def pure_pursuit(pose: Array, carrot: Array, remaining: float, speed: float, w_m
     Turns on the spot when the carrot is more than ``turn_in_place`` rad off the heading (the
     streets are narrow); slows down over the last metre (``remaining`` m to the goal).
     """
-    dx, dy = carrot[0] - pose[0], carrot[1] - pose[1]
-    alpha = float(wrap_angle(np.arctan2(dy, dx) - pose[2]))
+    alpha = bearing(pose, carrot)
     if abs(alpha) > turn_in_place:
         return np.array([0.0, np.copysign(w_max, alpha)])
     v = speed * np.cos(alpha) * min(1.0, 0.5 + remaining)
-    w = np.clip(2.0 * max(v, 0.2) * np.sin(alpha) / max(np.hypot(dx, dy), 0.2), -w_max, w_max)
+    distance = np.hypot(carrot[0] - pose[0], carrot[1] - pose[1])
+    w = pursuit_turn_rate(alpha, max(v, 0.2), max(distance, 0.2), w_max)
     return np.array([v, w])
 
 

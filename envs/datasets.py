@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 from tqdm.auto import tqdm
 
+from envs.driving import bearing, pursuit_turn_rate
 from envs.lanes import lane_poses, street_tour
 from envs.motion_model import wrap_angle
 from envs.robot import HALF_TRACK, ROBOT_RADIUS, WHEEL_RADIUS
@@ -117,8 +118,8 @@ class PurePursuit:
         d = np.hypot(*(self.path[window] - pose[:2]).T)
         self.index = int(window[np.argmin(d)])
         carrot = self.path[self._at(self.index + int(self.lookahead / self.step))]
-        alpha = wrap_angle(np.arctan2(carrot[1] - pose[1], carrot[0] - pose[0]) - pose[2])
-        w = np.clip(2.0 * self.speed * np.sin(alpha) / self.lookahead, -self.w_max, self.w_max)
+        alpha = bearing(pose, carrot)
+        w = pursuit_turn_rate(alpha, self.speed, self.lookahead, self.w_max)
         v = self.speed * max(0.3, np.cos(alpha))  # slow down in sharp turns
         return np.array([v, w])
 
