@@ -6,8 +6,7 @@ Names load on first use (stable-baselines3 and torch only for the PPO names).
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from localization._lazy import lazy_names
 
 _LAZY = {
     "StreetPlanner": "planner", "PlannedPath": "planner", "path_length": "planner",
@@ -20,14 +19,28 @@ _LAZY = {
     "Episode": "evaluation", "run_episode": "evaluation", "run_episodes": "evaluation",
     "summarize": "evaluation",
 }
-__all__ = sorted(_LAZY)
+__all__ = [
+    "POSE_SOURCES",
+    "Episode",
+    "LaneStart",
+    "NavigationFeatures",
+    "NavigationObservation",
+    "Navigator",
+    "PPOAgent",
+    "PlannedPath",
+    "ScriptedAgent",
+    "StreetPlanner",
+    "StreetProgressReward",
+    "check_belief_observation",
+    "load_policy",
+    "make_pose_env",
+    "make_ppo",
+    "path_length",
+    "pure_pursuit",
+    "run_episode",
+    "run_episodes",
+    "save_policy",
+    "summarize",
+]
 
-
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_names(__name__, _LAZY, globals())

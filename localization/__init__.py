@@ -17,8 +17,7 @@ neither MuJoCo nor torch, and PixelPCA never needs torch.
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from localization._lazy import lazy_names
 
 __version__ = "0.1.0"
 
@@ -50,14 +49,47 @@ _LAZY = {
     "fit_city_localizer": "workflows", "track_route": "workflows",
     "track_streets": "workflows", "track_metrics": "workflows",
 }
-__all__ = sorted(_LAZY)
+__all__ = [
+    "MEASUREMENTS",
+    "AppearanceLocalizer",
+    "BeliefFilter",
+    "BeliefWrapper",
+    "DeadReckoningWrapper",
+    "EfficientNetFeatures",
+    "FeatureExtractor",
+    "FunctionMeasurement",
+    "GSERegressor",
+    "GrassmannStiefelEigenmaps",
+    "KernelRegressor",
+    "OracleWrapper",
+    "OutOfDomainError",
+    "PixelPCA",
+    "PoseEKF",
+    "PoseMeasurement",
+    "RetrievalRegressor",
+    "SmallCNNFeatures",
+    "angular_error",
+    "angular_rmse",
+    "body_to_world",
+    "chi2_band",
+    "cov_to_triu",
+    "features_from_state",
+    "fit_city_localizer",
+    "global_dimension",
+    "grid_search",
+    "intrinsic_dimension_table",
+    "jacobian_regression",
+    "make_features",
+    "pose_residual",
+    "rmse",
+    "rrmse",
+    "select_n_neighbors",
+    "to_body",
+    "track_metrics",
+    "track_route",
+    "track_streets",
+    "triu_to_cov",
+    "wrap_angle",
+]
 
-
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_names(__name__, _LAZY, globals())

@@ -14,7 +14,7 @@ PACKAGES = ("envs", "localization", "agents")
 
 #: lowest layer first; a module may import only from its own layer or lower ones
 LAYERS: list[tuple[str, ...]] = [
-    ("localization", "localization.geometry"),
+    ("localization", "localization.geometry", "localization._lazy"),
     ("envs",),
     ("localization.features",),
     ("localization.gse", "localization.metrics", "localization.model_selection",
@@ -142,3 +142,12 @@ def test_public_names_resolve():
     for pkg in (localization, agents, localization.workflows):
         for name in pkg.__all__:
             assert getattr(pkg, name) is not None, f"{pkg.__name__}.{name}"
+
+
+def test_all_lists_exactly_the_lazy_names():
+    import agents
+    import localization
+    import localization.workflows
+
+    for pkg in (localization, agents, localization.workflows):
+        assert sorted(pkg.__all__) == sorted(pkg._LAZY), pkg.__name__

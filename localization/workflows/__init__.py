@@ -10,8 +10,7 @@ Names load on first use (they import MuJoCo and matplotlib).
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from localization._lazy import lazy_names
 
 _LAZY = {
     "TrackResult": "tracking",
@@ -29,14 +28,21 @@ _LAZY = {
     "covariance_ellipse": "plotting",
     "plot_track": "plotting",
 }
-__all__ = sorted(_LAZY)
+__all__ = [
+    "GSE_GRID",
+    "MethodResult",
+    "TrackResult",
+    "covariance_ellipse",
+    "evaluate_methods",
+    "fit_city_localizer",
+    "fit_city_noise",
+    "fit_gse",
+    "nees_band",
+    "plot_track",
+    "position_errors",
+    "track_metrics",
+    "track_route",
+    "track_streets",
+]
 
-
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_names(__name__, _LAZY, globals())
