@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from localization._lazy import lazy_names
 from localization.features.base import FeatureExtractor, check_images, read_settings
 from localization.features.pixel_pca import PixelPCA
 
@@ -44,7 +45,7 @@ _REGISTRY = {
     "small_cnn": ("localization.features.small_cnn", "SmallCNNFeatures"),
 }
 FEATURE_NAMES = tuple(_REGISTRY)
-_LAZY = {cls: mod for mod, cls in _REGISTRY.values()}
+_LAZY = {cls: mod.rpartition(".")[2] for mod, cls in _REGISTRY.values() if cls != "PixelPCA"}
 
 
 def _extractor_class(name: str) -> type[FeatureExtractor]:
@@ -75,11 +76,4 @@ def features_from_state(state: dict[str, np.ndarray]) -> FeatureExtractor:
     return _extractor_class(kind).from_state(state)
 
 
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_names(__name__, _LAZY, globals())
