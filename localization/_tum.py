@@ -114,7 +114,7 @@ def _check_rows(path: Path, data: NDArray[np.float64], lines: NDArray[np.int_],
     same = np.flatnonzero(np.diff(data[order, 0]) == 0)
     if len(same):
         first, again = sorted(lines[order[[same[0], same[0] + 1]]])
-        raise ValueError(f"{path}, line {again}: timestamp {data[order[same[0]], 0]!r} "
+        raise ValueError(f"{path}, line {again}: timestamp {float(data[order[same[0]], 0])!r} "
                          f"already on line {first}")
 
 

@@ -265,7 +265,8 @@ def _match(files: list[Path], times: NDArray[np.float64], match: str, max_differ
     if not len(i_img):
         raise ValueError(f"{files[0].parent}: no image within {max_difference} s of a pose of "
                          f"{pose_file} (image times {stamps.min():.6f}..{stamps.max():.6f}, "
-                         f"poses {times.min():.6f}..{times.max():.6f})")
+                         f"poses {times.min():.6f}..{times.max():.6f}); images named by "
+                         "frame number need match='order'")
     return i_img, i_pose
 
 
