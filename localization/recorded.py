@@ -203,13 +203,16 @@ def load_recorded(path: str | Path, pose_file: str | Path | None = None, *,
     max_tilt : float
         Largest roll or pitch (rad) of a pose.
     require_poses : bool
-        Without poses (False and no pose file), return every image with ``poses=None``
-        (timestamps from the stems, or the image index).
+        True (for fitting): a pose file is needed, and images without a pose are dropped.
+        False (for predicting): every image is returned, with NaN pose rows for images
+        without a pose, or ``poses=None`` when there is no pose file.
 
     Returns
     -------
     Recording
-        ``images`` (n, H, W, 3) uint8, ``poses`` (n, 3) float64 or None, ``timestamps`` (n,).
+        ``images`` (n, H, W, 3) uint8, ``poses`` (n, 3) float64 or None, ``timestamps`` (n,)
+        float64: the images' (from their names), the pose file's when matched in order, or
+        the image index (a ``.npz``, or names that are not numbers without a pose file).
     """
     path = Path(path)
     if match not in MATCHES:
@@ -224,17 +227,23 @@ def load_recorded(path: str | Path, pose_file: str | Path | None = None, *,
         images, poses, _ = load_dataset(path)
         return Recording(images, poses, np.arange(len(images), dtype=np.float64))
     files = list_images(path)
+    stamps = _stem_times(files) if match != "order" else None
+    if match == "timestamp" and stamps is None:
+        raise ValueError(f"{path}: match='timestamp' but image names are not all numbers")
     pose_file = _find_pose_file(path, pose_file, require_poses)
     if pose_file is None:
-        stamps = _stem_times(files) if match != "order" else None
-        if match == "timestamp" and stamps is None:
-            raise ValueError(f"{path}: match='timestamp' but image names are not all numbers")
         stamps = np.arange(len(files), dtype=np.float64) if stamps is None else stamps
         return Recording(read_images(files, resize), None, stamps)
     times, poses = read_tum(pose_file, max_tilt)
-    i_img, i_pose = _match(files, times, match, max_difference, pose_file)
-    images = read_images([files[i] for i in i_img], resize)
-    return Recording(images, poses[i_pose], times[i_pose])
+    i_img, i_pose = _match(path, stamps, times, max_difference, pose_file)
+    if stamps is None:  # matched in order: the pose file's times
+        stamps = times
+    if require_poses:  # images without a pose are dropped
+        return Recording(read_images([files[i] for i in i_img], resize), poses[i_pose],
+                         stamps[i_img])
+    out = np.full((len(files), 3), np.nan)
+    out[i_img] = poses[i_pose]
+    return Recording(read_images(files, resize), out, stamps)
 
 
 def _find_pose_file(folder: Path, pose_file: str | Path | None, required: bool) -> Path | None:
@@ -249,21 +258,20 @@ def _find_pose_file(folder: Path, pose_file: str | Path | None, required: bool) 
     return found[0] if found else None
 
 
-def _match(files: list[Path], times: NDArray[np.float64], match: str, max_difference: float,
-           pose_file: Path) -> tuple[NDArray[np.int_], NDArray[np.int_]]:
-    stamps = _stem_times(files) if match != "order" else None
-    if match == "timestamp" and stamps is None:
-        raise ValueError(f"{files[0].parent}: match='timestamp' but image names are not all "
-                         "numbers")
+def _match(folder: Path, stamps: NDArray[np.float64] | None, times: NDArray[np.float64],
+           max_difference: float, pose_file: Path
+           ) -> tuple[NDArray[np.int_], NDArray[np.int_]]:
+    """Images (their stem times, or None: in order) to the poses at ``times``."""
     if stamps is None:
-        if len(files) != len(times):
-            raise ValueError(f"{files[0].parent}: {len(files)} images but {len(times)} poses in "
-                             f"{pose_file}; images named by timestamp can be matched, others "
-                             "need one pose per image")
-        return np.arange(len(files)), np.arange(len(files))
+        n = len(list_images(folder))
+        if n != len(times):
+            raise ValueError(f"{folder}: {n} images but {len(times)} poses in {pose_file}; "
+                             "images named by timestamp can be matched, others need one pose "
+                             "per image")
+        return np.arange(n), np.arange(n)
     i_img, i_pose = associate(stamps, times, max_difference)
     if not len(i_img):
-        raise ValueError(f"{files[0].parent}: no image within {max_difference} s of a pose of "
+        raise ValueError(f"{folder}: no image within {max_difference} s of a pose of "
                          f"{pose_file} (image times {stamps.min():.6f}..{stamps.max():.6f}, "
                          f"poses {times.min():.6f}..{times.max():.6f}); images named by "
                          "frame number need match='order'")

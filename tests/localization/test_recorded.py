@@ -101,10 +101,13 @@ def test_folder_matched_by_timestamp(tmp_path):
     rec = load_recorded(folder)
     assert rec.images.shape == (5, 12, 16, 3) and rec.images.dtype == np.uint8
     assert rec.poses.shape == (5, 3)
-    assert np.allclose(rec.timestamps, [100.0, 100.1, 100.3, 100.4, 100.5])
-    for img, pose, t in zip(rec.images, rec.poses, rec.timestamps):
-        k = round((t - 100.0) / 0.1)
+    assert np.allclose(rec.timestamps, [100.0, 100.1, 100.312, 100.4, 100.5])  # the images'
+    for img, pose, k in zip(rec.images, rec.poses, [0, 1, 3, 4, 5]):
         assert np.array_equal(img, images[k]) and np.allclose(pose, poses[k], atol=1e-6)
+    every = load_recorded(folder, require_poses=False)  # for predicting: every image
+    assert np.allclose(every.timestamps, [*rec.timestamps, 200.0])
+    assert np.array_equal(every.images[:5], rec.images)
+    assert np.array_equal(every.poses[:5], rec.poses) and np.isnan(every.poses[5]).all()
 
 
 def test_folder_matched_in_order_when_names_are_not_numbers(tmp_path):
