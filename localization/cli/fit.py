@@ -29,6 +29,7 @@ from localization.features import FEATURE_NAMES
 from localization.recorded import MAX_DIFFERENCE
 
 LANES = ("route", "streets")
+MIN_DRIVE = 200  # steps: 4 x the block of filtering.measurement_noise.correlation_time
 
 
 @dataclass
@@ -115,9 +116,10 @@ def fit_city(args: Args, out: Path) -> None:
 
     if args.lanes not in LANES:
         raise ValueError(f"--lanes must be one of {', '.join(LANES)}, got {args.lanes!r}")
-    for name in ("n_train", "n_drive"):
-        if getattr(args, name) < 1:
-            raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
+    if args.n_train < 1:
+        raise ValueError(f"--n-train must be >= 1, got {args.n_train}")
+    if args.n_drive < MIN_DRIVE:  # the noise's correlation time needs 4 blocks of 50 steps
+        raise ValueError(f"--n-drive must be >= {MIN_DRIVE}, got {args.n_drive}")
     params = localizer_params(args)
     env = gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, camera=args.camera,
                    image_size=(args.image_size, args.image_size),
