@@ -14,13 +14,14 @@ The planar pose ``[x, y, yaw]`` takes ``tx, ty`` and the yaw about z of the quat
 roll of -pi/2 and must be converted to the body frame (x forward, z up) first.
 
 Image folder: PNG or JPEG files (``.png``, ``.jpg``, ``.jpeg``, any case) in the folder, or in
-its ``rgb/`` subfolder (the TUM RGB-D layout), read in sorted name order. All must share one
+its ``rgb/`` subfolder (the TUM RGB-D layout), read in natural name order (``frame_2``
+before ``frame_10``). All must share one
 size (or pass ``resize``). Grayscale, palette and RGBA images are converted to RGB (the
 alpha channel is dropped, not blended); 16-bit and float images (depth maps) are refused.
 Images are matched to poses by the timestamp in the file name stem
 (``1305031102.175304.png``): each image to the pose nearest in time if within
 ``max_difference`` seconds (0.02 s, like TUM's ``associate.py``), each pose used at most once;
-images without a pose are dropped. When the stems are not all numbers, images are matched to
+images without a pose are dropped for fitting (kept with NaN poses for predicting). When the stems are not all numbers, images are matched to
 poses in order (sorted names against the pose file's lines), which needs equal counts.
 
 ``.npz`` dataset (:func:`save_dataset` / :func:`load_dataset`, also exported by :mod:`envs`):
@@ -34,6 +35,7 @@ line for text files.
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -62,18 +64,20 @@ class Recording(NamedTuple):
     """Images with their poses, as :func:`load_recorded` returns them."""
 
     images: NDArray[np.uint8]  # (n, H, W, 3)
-    poses: NDArray[np.float64] | None  # (n, 3) [x, y, yaw]; None when no pose was asked for
+    poses: NDArray[np.float64] | None  # (n, 3) [x, y, yaw]; None without a pose file
     timestamps: NDArray[np.float64]  # (n,) seconds (the image index when there are none)
 
 
 # --------------------------------------------------------------------------- images
 def list_images(folder: str | Path) -> list[Path]:
-    """PNG/JPEG files of ``folder`` (or of its ``rgb/`` subfolder when it has none), sorted."""
+    """PNG/JPEG files of ``folder`` (or of its ``rgb/`` subfolder when it has none), in
+    natural order (numbers in names compare as numbers)."""
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(f"no image folder at {folder}")
     for where in (folder, folder / "rgb"):
-        files = sorted(p for p in where.glob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
+        files = sorted((p for p in where.glob("*") if p.suffix.lower() in IMAGE_SUFFIXES),
+                       key=_natural_key)
         if files:
             return files
     raise ValueError(f"{folder}: no images ({', '.join(IMAGE_SUFFIXES)}) in it or in its rgb/")
@@ -108,6 +112,11 @@ def read_images(files: list[Path], resize: tuple[int, int] | None = None
                              f"{first.shape[0]}x{first.shape[1]} of {files[0]}; pass resize")
         out[i] = img
     return out
+
+
+def _natural_key(path: Path) -> list[Any]:
+    """``frame_2.png`` before ``frame_10.png``: digit runs compare as numbers."""
+    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", path.name)]
 
 
 def _check_resize(resize: Any) -> tuple[int, int]:

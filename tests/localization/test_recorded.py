@@ -118,6 +118,16 @@ def test_folder_matched_in_order_when_names_are_not_numbers(tmp_path):
     assert np.allclose(rec.timestamps, 100.0 + 0.1 * np.arange(4))
 
 
+def test_order_is_natural(tmp_path):
+    names = ["frame_9", "frame_10", "frame_100", "frame_11"]
+    folder, images, poses = _folder(tmp_path, 4, names)
+    # the pose file lists frames 9, 10, 100, 11: sorted naturally, 9, 10, 11, 100
+    write_tum(folder / "poses.txt", np.arange(4.0), poses[[0, 1, 3, 2]])
+    rec = load_recorded(folder)
+    assert np.array_equal(rec.images, images[[0, 1, 3, 2]])
+    assert np.allclose(rec.poses, poses[[0, 1, 3, 2]], atol=1e-6)
+
+
 def test_numeric_names_can_be_matched_in_order(tmp_path):
     folder, images, _ = _folder(tmp_path, 3, ["000001", "000002", "000003"])
     with pytest.raises(ValueError, match="no image within"):
