@@ -21,7 +21,8 @@ alpha channel is dropped, not blended); 16-bit and float images (depth maps) are
 Images are matched to poses by the timestamp in the file name stem
 (``1305031102.175304.png``): each image to the pose nearest in time if within
 ``max_difference`` seconds (0.02 s, like TUM's ``associate.py``), each pose used at most once;
-images without a pose are dropped for fitting (kept with NaN poses for predicting). When the stems are not all numbers, images are matched to
+images without a pose are dropped for fitting (kept with NaN poses for predicting); images
+named by timestamp come in time order. When the stems are not all numbers, images are matched to
 poses in order (sorted names against the pose file's lines), which needs equal counts.
 
 ``.npz`` dataset (:func:`save_dataset` / :func:`load_dataset`, also exported by :mod:`envs`):
@@ -239,6 +240,9 @@ def load_recorded(path: str | Path, pose_file: str | Path | None = None, *,
     stamps = _stem_times(files) if match != "order" else None
     if match == "timestamp" and stamps is None:
         raise ValueError(f"{path}: match='timestamp' but image names are not all numbers")
+    if stamps is not None:  # in time order ("1.5" before "1.25" by name)
+        order = np.argsort(stamps, kind="stable")
+        files, stamps = [files[i] for i in order], stamps[order]
     pose_file = _find_pose_file(path, pose_file, require_poses)
     if pose_file is None:
         stamps = np.arange(len(files), dtype=np.float64) if stamps is None else stamps

@@ -118,6 +118,14 @@ def test_folder_matched_in_order_when_names_are_not_numbers(tmp_path):
     assert np.allclose(rec.timestamps, 100.0 + 0.1 * np.arange(4))
 
 
+def test_timestamp_names_come_in_time_order(tmp_path):
+    folder, images, poses = _folder(tmp_path, 3, ["1.5", "1.25", "10"], t0=0.0)
+    write_tum(folder / "poses.txt", [1.25, 1.5, 10.0], poses)
+    rec = load_recorded(folder, require_poses=False)
+    assert np.array_equal(rec.timestamps, [1.25, 1.5, 10.0])
+    assert np.array_equal(rec.images, images[[1, 0, 2]]) and np.allclose(rec.poses, poses)
+
+
 def test_order_is_natural(tmp_path):
     names = ["frame_9", "frame_10", "frame_100", "frame_11"]
     folder, images, poses = _folder(tmp_path, 4, names)
