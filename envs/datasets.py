@@ -21,13 +21,15 @@ rendered, which is fast.
 :func:`drive_route` records a drive around the route with its controls (for the process
 noise and the measurement noise of a filter), :func:`drive_streets` one along a random tour
 of all the streets.
+
+:func:`save_dataset` / :func:`load_dataset` (the ``.npz`` format) are defined in
+:mod:`localization.recorded`, next to the readers of recorded image folders, and re-exported
+here.
 """
 
 from __future__ import annotations
 
-import json
 from itertools import pairwise
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -40,6 +42,7 @@ from envs.driving import bearing, pursuit_turn_rate
 from envs.lanes import lane_poses, street_tour
 from envs.motion_model import wrap_angle
 from envs.robot import HALF_TRACK, ROBOT_RADIUS, WHEEL_RADIUS
+from localization.recorded import load_dataset, save_dataset  # the .npz format, one definition
 
 __all__ = ["MODES", "PurePursuit", "collect_dataset", "drive_route", "drive_streets", "grid_poses",
            "load_dataset", "save_dataset"]
@@ -275,62 +278,3 @@ def _drive(env: gym.Env, pilot: PurePursuit, start: NDArray[np.float64], n: int,
         obs, _, _, _, info = base.step(controls[t])
         images[t + 1], poses[t + 1] = obs["image"], info["pose"]
     return images, poses, controls
-
-
-def save_dataset(path: str | Path, images: NDArray[np.uint8], poses: NDArray[np.float64], **meta: Any) -> Path:
-    """Save to a compressed ``.npz`` with ``images``, ``poses`` and ``meta`` (a JSON string).
-
-    Raises
-    ------
-    ValueError
-        On mismatched shapes/dtypes or metadata that is not JSON-serialisable.
-    """
-    images, poses = _check_arrays(np.asarray(images), np.asarray(poses), str(path))
-    try:
-        meta_json = json.dumps(meta, sort_keys=True)
-    except TypeError as err:
-        raise ValueError(f"dataset metadata must be JSON-serialisable: {err}") from None
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(path, images=images, poses=poses, meta=np.array(meta_json))
-    return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
-
-
-def load_dataset(path: str | Path) -> tuple[NDArray[np.uint8], NDArray[np.float64], dict[str, Any]]:
-    """Load ``(images, poses, meta)`` saved by :func:`save_dataset`.
-
-    Raises
-    ------
-    FileNotFoundError
-        If the file does not exist.
-    ValueError
-        If the file is not a readable npz, lacks an array, or the arrays are inconsistent.
-    """
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"no dataset at {path}")
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in ("images", "poses", "meta") if k in z.files}
-    except Exception as err:  # zipfile.BadZipFile, OSError, EOFError, zlib errors, pickled data...
-        raise ValueError(f"dataset {path} is corrupted or not an npz file: {err}") from err
-    missing = [k for k in ("images", "poses", "meta") if k not in arrays]
-    if missing:
-        raise ValueError(f"dataset {path} lacks arrays {missing}")
-    images, poses, meta_json = arrays["images"], arrays["poses"], str(arrays["meta"])
-    try:
-        meta = json.loads(meta_json)
-    except json.JSONDecodeError as err:
-        raise ValueError(f"dataset {path} has corrupted metadata: {err}") from None
-    images, poses = _check_arrays(images, poses, str(path))
-    return images, poses, meta
-
-
-def _check_arrays(images: NDArray[Any], poses: NDArray[Any], where: str) -> tuple[NDArray[np.uint8], NDArray[np.float64]]:
-    if images.ndim != 4 or images.shape[-1] != 3 or images.dtype != np.uint8:
-        raise ValueError(f"{where}: images must be (n, H, W, 3) uint8, got {images.shape} {images.dtype}")
-    if poses.shape != (len(images), 3):
-        raise ValueError(f"{where}: poses must have shape ({len(images)}, 3), got {poses.shape}")
-    if not np.all(np.isfinite(poses)):
-        raise ValueError(f"{where}: poses contain NaN or inf")
-    return images, poses.astype(np.float64)

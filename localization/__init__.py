@@ -3,6 +3,7 @@
 The public names, grouped by layer (imports flow one way, top to bottom)::
 
     geometry      wrap_angle, pose_residual, body_to_world, ...   (numpy only)
+    recorded      load_recorded, read_tum, write_tum   (image folders, TUM poses; numpy + Pillow)
     features      PixelPCA, EfficientNetFeatures, SmallCNNFeatures, make_features
     gse           GrassmannStiefelEigenmaps, GSERegressor, jacobian_regression
     baselines     KernelRegressor, RetrievalRegressor (+ metrics, model_selection, ...)
@@ -25,6 +26,8 @@ _LAZY = {
     # geometry
     "wrap_angle": "geometry", "pose_residual": "geometry", "body_to_world": "geometry",
     "to_body": "geometry", "cov_to_triu": "geometry", "triu_to_cov": "geometry",
+    # recorded data (image folders + TUM pose files, our .npz)
+    "load_recorded": "recorded", "read_tum": "recorded", "write_tum": "recorded",
     # features
     "PixelPCA": "features", "EfficientNetFeatures": "features",
     "SmallCNNFeatures": "features", "FeatureExtractor": "features",
@@ -79,8 +82,10 @@ __all__ = [
     "grid_search",
     "intrinsic_dimension_table",
     "jacobian_regression",
+    "load_recorded",
     "make_features",
     "pose_residual",
+    "read_tum",
     "rmse",
     "rrmse",
     "select_n_neighbors",
@@ -90,6 +95,7 @@ __all__ = [
     "track_streets",
     "triu_to_cov",
     "wrap_angle",
+    "write_tum",
 ]
 
 __getattr__, __dir__ = lazy_names(__name__, _LAZY, globals())
