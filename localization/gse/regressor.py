@@ -393,7 +393,7 @@ class GSERegressor(PoseBlockMixin, BaseEstimator):
 
     def feature_tangents(self, W: Array) -> Array:
         """Tangent vectors of the feature manifold at ``g_u(r*(w))``: the feature block
-        ``G_u`` of the recovery Jacobian field (docs/method.md §7.2), shape (n, m, q), original units
+        ``G_u`` of the recovery Jacobian field (method §7.2), shape (n, m, q), original units
         per unit of representation (the paper's Fig. 3)."""
         r, _ = self._r_star(W, False)
         out = np.full((len(r), len(self.w_mean_), r.shape[1]), np.nan)

@@ -99,7 +99,7 @@ def test_planar_gse_beats_knr(planar):
     W, T, Wt, Tt, _, model = planar
     psi, psi_knr = rrmse(model.predict(Wt), Tt), rrmse(knr(W, T, Wt), Tt)
     phi, phi_knr = rrmse(model.predict_features(Tt), Wt), rrmse(knr(T, W, Tt), Wt)
-    # measured: psi* 0.0025 vs 0.028; Phi* 0.021 vs 0.065 (method §16.2 item 8: 0.011/0.030, 0.041/0.058)
+    # measured: psi* 0.0025 vs 0.028; Phi* 0.021 vs 0.065 (method §16.2.8: 0.011/0.030, 0.041/0.058)
     assert psi < 0.015 and psi < 0.4 * psi_knr
     assert phi < 0.045 and phi < 0.6 * phi_knr
     assert model.gse_.frame_condition_.max() < 1.5 and model.pose_condition_.max() < 3
