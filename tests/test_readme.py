@@ -130,3 +130,25 @@ def test_python_blocks_run_in_order(tmp_path: Path) -> None:
     assert ran == len(code)
     assert (tmp_path / "results" / "route_localizer.npz").is_file()
     assert (tmp_path / "data" / "route.npz").is_file()
+
+
+def slug(heading: str) -> str:
+    """GitHub's anchor of a markdown heading."""
+    text = re.sub(r"[^\w\- ]", "", heading.strip().lower().replace("\\", ""))
+    return text.replace(" ", "-")
+
+
+@pytest.mark.parametrize("page", ["README.md", "docs/method.md", "docs/results.md",
+                                  "docs/benchmarks.md", "docs/CONTRACTS.md"])
+def test_links_resolve(page: str) -> None:
+    """Relative links name files that exist and headings that exist in them."""
+    path = ROOT / page
+    for target in re.findall(r"\]\(([^)\s]+)\)", path.read_text()):
+        if re.match(r"\w+://", target):
+            continue
+        file, _, anchor = target.partition("#")
+        dest = (path.parent / file).resolve() if file else path
+        assert dest.exists(), f"{page} links to a missing file {target}"
+        if anchor:
+            heads = re.findall(r"^#+ (.*)$", dest.read_text(), re.MULTILINE)
+            assert anchor in {slug(h) for h in heads}, f"{page}: no heading for #{anchor}"
