@@ -31,7 +31,7 @@ FENCE = re.compile(r"^```(\w*)\n(.*?)^```", re.DOTALL | re.MULTILINE)
 
 # Runs the blocks in one namespace; a failing block prints its number and the error.
 RUNNER = r'''
-import json, shutil, sys, traceback
+import json, shutil, sys, time, traceback
 from pathlib import Path
 
 blocks = json.loads(Path(sys.argv[1]).read_text())
@@ -41,13 +41,14 @@ demo.parent.mkdir(exist_ok=True)  # stands in for `make demo`, which writes resu
 for i, code in enumerate(blocks, 1):
     if not demo.exists() and quick.exists():  # stands in for `make demo` (see the test)
         shutil.copy(quick, demo)
+    t0 = time.perf_counter()
     try:
         exec(compile(code, f"README python block {i}", "exec"), namespace)
     except BaseException:
         print(f"README python block {i} of {len(blocks)} failed:", file=sys.stderr)
         traceback.print_exc()
         sys.exit(1)
-    print(f"README python block {i} ran", flush=True)
+    print(f"README python block {i} ran ({time.perf_counter() - t0:.1f} s)", flush=True)
 '''
 
 
@@ -125,8 +126,9 @@ def test_python_blocks_run_in_order(tmp_path: Path) -> None:
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     proc = subprocess.run([sys.executable, "runner.py", "blocks.json"], cwd=tmp_path, env=env,
                           capture_output=True, text=True, timeout=600, check=False)
-    ran = proc.stdout.count("ran")
-    assert proc.returncode == 0, f"{ran} of {len(code)} blocks ran; then:\n{proc.stderr[-4000:]}"
+    ran = proc.stdout.count(" ran (")
+    assert proc.returncode == 0, f"{proc.stdout}{ran} of {len(code)} blocks ran; then:\n" \
+        f"{proc.stderr[-4000:]}"
     assert ran == len(code)
     assert (tmp_path / "results" / "route_localizer.npz").is_file()
     assert (tmp_path / "data" / "route.npz").is_file()
