@@ -27,7 +27,7 @@ name                  z                   h(theta)             H
 ``"representation"``  r*(w)               R*(theta)            dR*/dtheta (q x 3)
 ====================  ==================  ===================  ========================
 
-The heading is periodic and GSE cuts its circle open at +-pi (spec gse.md section 9):
+The heading is periodic and GSE cuts its circle open at +-pi (docs/method.md §10):
 a neighbourhood graph must not link samples across the cut, so every street driven
 along heading ~pi would be split lengthwise into two halves. The localizer therefore
 fits GSE on a rotated heading ``yaw - yaw_cut_ + pi`` whose cut lies at the heading

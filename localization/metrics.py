@@ -7,7 +7,7 @@ Formulas (``theta_hat``, ``theta`` of shape (n, d); ``C`` the chosen columns):
 * ``rrmse`` = sqrt( sum_i sum_{c in C} (theta_hat_ic - theta_ic)^2
   / sum_i sum_{c in C} (theta_ic - mean_c(theta))^2 ),
   the relative RMSE used for the seed paper's Table II (the paper does not define
-  it; this is the choice stated in docs/design gse.md section 5.1). 0 is perfect;
+  it; this is the choice stated in docs/method.md §16.2). 0 is perfect;
   1 is what predicting the mean achieves. Periodic columns are excluded by default
   (their variance is not meaningful); for robot positions pass ``columns=(0, 1)``.
 * ``angular_error`` = wrap(a - b) to (-pi, pi]; ``angular_rmse`` its RMS.

@@ -80,7 +80,7 @@ class FeatureMap:
     """A smooth synthetic feature-modelling function Phi: theta -> w in R^m.
 
     ``Phi_k(theta) = sin(pi a_k . e(theta) + b_k)`` with ``a_k ~ N(0, scale^2)``
-    (spec gse.md section 6 item 8) where ``e(theta)`` is theta itself, except
+    (docs/method.md §16.2.8) where ``e(theta)`` is theta itself, except
     that each periodic column phi becomes (cos phi, sin phi) / (2 pi) * period_scale.
     """
 
@@ -126,7 +126,7 @@ def regression_manifold(n: int, dim_theta: int = 2, m: int = 30, seed: int = 0,
                         map_seed: int = 1234) -> tuple[Array, Array, FeatureMap]:
     """Samples (w = Phi(theta), theta) of a synthetic regression manifold.
 
-    ``dim_theta=2``: theta uniform in [0, 1]^2 (spec gse.md section 6 item 8).
+    ``dim_theta=2``: theta uniform in [0, 1]^2 (docs/method.md §16.2.8).
     ``dim_theta=3``: theta = (x, y, yaw), (x, y) in [0, 1]^2 and yaw uniform in
     (-pi, pi], a periodic column (index 2) like a robot pose.
 

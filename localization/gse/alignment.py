@@ -1,4 +1,4 @@
-"""Stiefel alignment of GSE (spec gse.md section 2.4(b)): smooth orthonormal frame
+"""Stiefel alignment of GSE (docs/method.md §5): smooth orthonormal frame
 fields ``H_i = Q_i v_i`` over local tangent bases, from a connection-Laplacian eigenproblem
 with polarised links, plus the Grassmann kernels and a landmark warm start."""
 
@@ -71,7 +71,7 @@ def _edge_products(Q: Array, ei: Array, ej: Array) -> Array:
 def align_frames(Q: Array, ei: Array, ej: Array, K: Array, n_refine: int = 5, seed: int = 0,
                  dense_max: int = 1500, S: Array | None = None, H0: Array | None = None,
                  lu_max: int = 6000) -> tuple[Array, Array, Array]:
-    """Polarised Stiefel alignment (spec 2.4(b)).
+    """Polarised Stiefel alignment (docs/method.md §5).
 
     Links ``O_ij = polar(Q_i^T Q_j)``, blocks ``A_ij = K_ij O_ij``; the smallest q
     generalized eigenvectors of ``(D - A) V = lambda D V`` give blocks ``v_i``,

@@ -1,7 +1,7 @@
 """Grassmann & Stiefel Eigenmaps (GSE): tangent-bundle manifold learning.
 
-Implements spec /work/shared/design/gse.md section 2 with the polarised Stiefel
-alignment of section 2.4(b): local weighted PCA tangents ``Q_i``, a Grassmann
+Implements docs/method.md §4-§7 with the polarised Stiefel
+alignment of §5: local weighted PCA tangents ``Q_i``, a Grassmann
 (Binet-Cauchy) x Euclidean heat kernel, a connection-Laplacian eigenproblem for
 smooth orthonormal frames ``H_i = Q_i v_i``, the embedding from ``L Y = B``, the
 out-of-sample embedding ``h``, the recovery map ``g`` and its Jacobian field ``G``.
@@ -44,7 +44,7 @@ from localization.gse.jacobian_regression import jacobian_regression
 __all__ = ["GrassmannStiefelEigenmaps", "align_frames", "embed_from_frames", "grassmann_kernel"]
 
 def embed_from_frames(Z: Array, H: Array, ei: Array, ej: Array, K: Array) -> Array:
-    """Solve ``L Y = B`` (spec 2.5) for zero-mean coordinates Y (n, q).
+    """Solve ``L Y = B`` (docs/method.md §6) for zero-mean coordinates Y (n, q).
 
     ``B_i = 1/2 sum_j K_ij (H_i + H_j)^T (Z_i - Z_j)``, computed with sparse
     products only; CG with a Jacobi preconditioner from zero (consistent
@@ -155,7 +155,7 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
         ``cut`` (n,) or (n, c), optional: periodic coordinates in radians (e.g. a
         heading, or the angle along a closed route); graph links whose unwrapped
         difference in any of them exceeds pi are removed, so each closed loop is cut
-        open at +-pi and the sample is embedded as one chart (spec section 9).
+        open at +-pi and the sample is embedded as one chart (docs/method.md §10).
         """
         Z = check_2d(Z, "Z")
         n, p = Z.shape
@@ -229,7 +229,7 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
         return bad & (self.out_of_domain != "ignore")
 
     def transform(self, Z: Array) -> Array:
-        """Out-of-sample embedding h(Z) (spec 2.6), shape (n, q); sample-wise."""
+        """Out-of-sample embedding h(Z) (docs/method.md §7.1), shape (n, q); sample-wise."""
         check_is_fitted(self, "embedding_")
         Z = check_2d(Z, "Z", self.Z_.shape[1])
         q, k = self.n_components, self.n_neighbors + 1
@@ -307,7 +307,7 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
         return np.array(errs)
 
     def inverse_transform(self, Y: Array) -> Array:
-        """Recovery map g(y) (spec 2.7), shape (n, p)."""
+        """Recovery map g(y) (docs/method.md §7.2), shape (n, p)."""
         check_is_fitted(self, "embedding_")
         Y = check_2d(Y, "Y", self.n_components)
         return self._recover(Y)[0]

@@ -1,7 +1,7 @@
 """Jacobian Regression (JR): kernel average of first-order Taylor expansions.
 
 Given sample inputs ``x_i``, outputs ``y_i`` and Jacobian estimates ``G_i``
-(spec gse.md section 2.8)::
+(docs/method.md §9)::
 
     f*(x) = sum_i K(x, x_i) [y_i + G_i (x - x_i)] / sum_i K(x, x_i)
 
@@ -136,7 +136,7 @@ def loo_bandwidth(dX: Array, Y_nb: Array, G_nb: Array, Y: Array, grid: Array,
 
 
 class JacobianRegression(BaseEstimator):
-    """Jacobian Regression with a truncated Gaussian kernel (spec section 2.8).
+    """Jacobian Regression with a truncated Gaussian kernel (docs/method.md §9).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""Regression on an unknown input manifold with GSE (spec gse.md section 3).
+"""Regression on an unknown input manifold with GSE (docs/method.md §8).
 
 GSE is fitted on ``Z = (standardised w, scaled theta)``; the representation maps
 ``r(w)`` and ``R(theta)`` are extended off the sample by Jacobian Regression and
@@ -7,7 +7,7 @@ composed with the recovery map: ``psi*(w) = g_v(r*(w))``, ``Phi*(theta) = g_u(R*
 A periodic pose column (yaw) enters Z as a (cos, sin) pair of radius
 ``theta_scale`` (so Z-space neighbourhoods see the true geometry), and the GSE
 graph is cut open at yaw = +-pi: a closed loop cannot be embedded by the
-least-squares step of spec 2.5 (spec section 9). The same holds for a closed loop
+least-squares step of docs/method.md §6 (see §10). The same holds for a closed loop
 traced by the positions (a robot driving around a block, as in the paper's
 experiment): ``loop_cut="auto"`` detects it (:func:`~localization.gse.graph.loop_coordinate`)
 and cuts it at one place. Every kernel average keeps only the neighbours on the
@@ -87,7 +87,7 @@ class GSERegressor(PoseBlockMixin, BaseEstimator):
         Neighbours of the two Jacobian regressions (None: n_neighbors).
     kernel_grassmann : bool, default=False
         Multiply K_W by the Binet-Cauchy factor between the local PCA tangent of the
-        w-sample at the query and Span(G_u) at the sample (spec 3.2). The factor is not
+        w-sample at the query and Span(G_u) at the sample (docs/method.md §8.2). The factor is not
         differentiated: embed_jacobian then ignores its (small) derivative.
     loop_cut : {"auto", "none"}, default="auto"
         "auto": if the linear (position) columns of Theta trace a closed loop, cut it
@@ -393,7 +393,7 @@ class GSERegressor(PoseBlockMixin, BaseEstimator):
 
     def feature_tangents(self, W: Array) -> Array:
         """Tangent vectors of the feature manifold at ``g_u(r*(w))``: the feature block
-        ``G_u`` of the recovery Jacobian field (spec 2.7), shape (n, m, q), original units
+        ``G_u`` of the recovery Jacobian field (method §7.2), shape (n, m, q), original units
         per unit of representation (the paper's Fig. 3)."""
         r, _ = self._r_star(W, False)
         out = np.full((len(r), len(self.w_mean_), r.shape[1]), np.nan)

@@ -1,6 +1,6 @@
 """Tests of GrassmannStiefelEigenmaps against manifolds with known geometry.
 
-Magnitudes follow spec gse.md section 6 (prototype of the polarised alignment).
+Magnitudes follow docs/method.md §16.2 (prototype of the polarised alignment).
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ def test_swiss_roll_isometric_embedding_and_health(roll1000):
     # best affine map y -> iso is (nearly) a rotation: singular values ~ 1
     A, *_ = np.linalg.lstsq(np.column_stack([g.embedding_, np.ones(len(Z))]), iso, rcond=None)
     assert np.allclose(np.linalg.svd(A[:2], compute_uv=False), 1.0, atol=0.02)
-    # alignment health (spec 6.2): cond(v_i) ~ 1, frames span the PCA tangents, gap
+    # alignment health (method §16.2.2): cond(v_i) ~ 1, frames span the PCA tangents, gap
     assert g.frame_condition_.max() < 1.1
     P = g.frames_ - g.tangents_ @ (np.swapaxes(g.tangents_, 1, 2) @ g.frames_)
     assert np.abs(P).max() < 1e-10
@@ -61,7 +61,7 @@ def test_swiss_roll_tangent_angles(roll1000):
     T = swiss_roll_tangents(params)
     ang_pca = max_angle_deg(g.tangents_, T)
     ang_G = max_angle_deg(g.recovery_jacobian(g.transform(Z)), T)
-    assert np.median(ang_pca) < 3.0  # spec: ~2 deg at n = 1000
+    assert np.median(ang_pca) < 3.0  # method §16.2.1: ~2 deg at n = 1000
     assert np.median(ang_G) < 3.0
     assert np.percentile(ang_G, 95) < 10.0
 
@@ -74,7 +74,7 @@ def test_reconstruction_shrinks_with_n():
         g = GrassmannStiefelEigenmaps(2, n_neighbors=15).fit(Z)
         errs.append((np.median(rel_reconstruction(g, Z)), np.median(rel_reconstruction(g, Zt))))
     ins, oos = np.array(errs).T
-    assert ins[1] < 5e-3 and ins[2] < 2.5e-3  # spec 6.4: ~3e-3 (n=1000), 1.7e-3 (n=2000)
+    assert ins[1] < 5e-3 and ins[2] < 2.5e-3  # method §16.2.4: ~3e-3 (n=1000), 1.7e-3 (n=2000)
     assert ins[0] > ins[1] > ins[2] and oos[0] > oos[1] > oos[2]
     assert np.all(oos < 3 * ins)  # out-of-sample error of the same order
 

@@ -1,4 +1,4 @@
-"""Tests of Jacobian Regression and GSERegressor (spec gse.md sections 2.8, 3, 6)."""
+"""Tests of Jacobian Regression and GSERegressor (docs/method.md §8, §9, §16.2)."""
 
 from __future__ import annotations
 
@@ -99,7 +99,7 @@ def test_planar_gse_beats_knr(planar):
     W, T, Wt, Tt, _, model = planar
     psi, psi_knr = rrmse(model.predict(Wt), Tt), rrmse(knr(W, T, Wt), Tt)
     phi, phi_knr = rrmse(model.predict_features(Tt), Wt), rrmse(knr(T, W, Tt), Wt)
-    # measured: psi* 0.0025 vs 0.028; Phi* 0.021 vs 0.065 (spec 6.8: 0.011/0.030, 0.041/0.058)
+    # measured: psi* 0.0025 vs 0.028; Phi* 0.021 vs 0.065 (method §16.2.8: 0.011/0.030, 0.041/0.058)
     assert psi < 0.015 and psi < 0.4 * psi_knr
     assert phi < 0.045 and phi < 0.6 * phi_knr
     assert model.gse_.frame_condition_.max() < 1.5 and model.pose_condition_.max() < 3
@@ -288,7 +288,7 @@ def test_closed_route_is_cut_once_and_gse_beats_knr(route):
     # measured: psi* 0.0032 vs KNR 0.0102; Phi* 0.0080 vs 0.024
     assert psi < 0.006 and psi < 0.5 * psi_knr
     assert phi < 0.015 and phi < 0.5 * phi_knr
-    # negative control: without the cut the least-squares embedding of spec 2.5 folds the
+    # negative control: without the cut the least-squares embedding of docs/method.md §6 folds the
     # loop (measured psi* 0.12)
     uncut = GSERegressor(n_components=1, n_neighbors=15, loop_cut="none").fit(W, T)
     assert uncut.loop_angle_ is None and rrmse(uncut.predict(Wt), Tt) > 5 * psi
