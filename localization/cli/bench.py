@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
 
@@ -77,7 +78,7 @@ def _check_gse_bench(c: GSEBenchConfig) -> None:
                                "accuracy_n_train", "accuracy_n_test", "timeout"),
                   non_negative=("seed", "map_seed", "threads"), prefix="gse_")
     if c.out:
-        check_output_file("gse_out", c.out + ".json")
+        check_output_file("gse_out", str(Path(c.out).with_suffix(".json")))
 
 
 def _check_filter_bench(c: FilterBenchConfig) -> None:
