@@ -5,6 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 GL := $(VENV)/mujoco_gl
 RUN = MUJOCO_GL=$$(cat $(GL)) $(PY)
+NAV = MUJOCO_GL=$$(cat $(GL)) $(VENV)/bin/appearance-nav
 
 .PHONY: setup demo test bench reproduce clean
 
@@ -27,20 +28,19 @@ $(GL): $(STAMP)
 	@echo "MUJOCO_GL=$$(cat $@)"
 
 demo: setup
-	$(RUN) scripts/demo.py
+	$(NAV) demo
 
 test: setup
 	$(RUN) -m pytest -n 2 -q
 
+# the agents benchmark needs the localizer that make demo writes
 bench: setup
-	$(RUN) scripts/bench_env.py --cameras
-	$(RUN) scripts/bench_gse.py
-	$(RUN) scripts/bench_filter.py
-	@test -f results/localizer.npz || $(RUN) scripts/demo.py
-	$(RUN) scripts/bench_agents.py
+	$(NAV) bench --only env,gse,filter
+	@test -f results/localizer.npz || $(NAV) demo
+	$(NAV) bench --only agents
 
 reproduce: setup
-	$(RUN) scripts/reproduce_paper.py
+	$(NAV) reproduce
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

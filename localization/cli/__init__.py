@@ -2,7 +2,10 @@
 
 Each command is a module of this package with a docstring (its ``--help`` text), an ``Args``
 dataclass (its options, CleanRL style) and ``run(args) -> None``; :data:`COMMANDS` lists them.
-A command module is imported only when its command runs, so ``--help`` is fast.
+A command module is imported only when its command runs, so ``--help`` is fast. A command
+may define ``check(args) -> None``: it runs before ``run`` and raises
+:class:`~localization.cli._args.UsageError` for a bad option, which is printed as argparse
+prints its own errors (exit status 2) before any long work starts.
 """
 
 from __future__ import annotations
@@ -12,7 +15,7 @@ import importlib
 import sys
 from types import ModuleType
 
-from localization.cli._args import add_dataclass_args, to_dataclass
+from localization.cli._args import UsageError, add_dataclass_args, to_dataclass
 
 __all__ = ["COMMANDS", "main"]
 
@@ -57,8 +60,22 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser(command if command in COMMANDS else None)
     ns = parser.parse_args(argv)
     mod = _module(ns.command)
-    mod.run(to_dataclass(mod.Args, ns))
+    try:
+        args = to_dataclass(mod.Args, ns)
+        if hasattr(mod, "check"):
+            mod.check(args)
+    except UsageError as err:
+        _subparser(parser, ns.command).error(str(err))
+    mod.run(args)
     return 0
+
+
+def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.ArgumentParser:
+    """The parser of ``command`` (its usage line goes with its errors)."""
+    for action in parser._subparsers._group_actions:
+        if isinstance(action, argparse._SubParsersAction) and command in action.choices:
+            return action.choices[command]
+    return parser
 
 
 if __name__ == "__main__":

@@ -1,9 +1,19 @@
 """Workflows: the jobs built from the toolkit and the simulator (the one layer of
 :mod:`localization` that imports :mod:`envs`).
 
-- fitting a localizer for a city and closed-loop tracking (:mod:`.tracking`);
-- the paper's experiment (:mod:`.experiment`);
+- fitting a localizer for a city and closed-loop tracking (:mod:`.tracking`), tracking runs
+  over models and starts with their report (:mod:`.track_runs`);
+- the demo pipeline (:mod:`.demo`), collecting a dataset to a file (:mod:`.collect`);
+- training PPO navigators (:mod:`.training`) and evaluating navigators (:mod:`.navigation`);
+- the paper's experiment: the methods (:mod:`.experiment`), the job (:mod:`.paper`), its
+  figures and tables (:mod:`.paper_report`), camera masks (:mod:`.camera_masks`) and the
+  feature-extractor factory (:mod:`.extractors`);
+- training the SmallCNN on other cities (:mod:`.small_cnn_training`);
+- benchmarks (:mod:`.benchmarks`);
 - plots (:mod:`.plotting`).
+
+Each job takes a settings dataclass (``DemoConfig``, ``TrackConfig``, ...) whose fields are
+the options of its ``appearance-nav`` command.
 
 Names load on first use (they import MuJoCo and matplotlib).
 """
@@ -26,7 +36,43 @@ _LAZY = {
     "fit_gse": "experiment",
     "position_errors": "experiment",
     "covariance_ellipse": "plotting",
+    "plot_route": "plotting",
     "plot_track": "plotting",
+    "CollectConfig": "collect",
+    "collect_out_path": "collect",
+    "collect_to_file": "collect",
+    "DemoConfig": "demo",
+    "demo_table": "demo",
+    "run_demo": "demo",
+    "TrackConfig": "track_runs",
+    "summarize_runs": "track_runs",
+    "track_markdown": "track_runs",
+    "run_tracking": "track_runs",
+    "TrainConfig": "training",
+    "VEC_ENVS": "training",
+    "make_vec_env": "training",
+    "train_agent": "training",
+    "AGENTS": "navigation",
+    "EvalConfig": "navigation",
+    "agents_table": "navigation",
+    "evaluate_agents": "navigation",
+    "FEATURE_DIMS": "paper",
+    "PaperConfig": "paper",
+    "run_paper": "paper",
+    "FEATURE_NAMES": "paper_report",
+    "PAPER_TABLE1": "paper_report",
+    "PAPER_TABLE2": "paper_report",
+    "figures": "paper_report",
+    "jsonable": "paper_report",
+    "tables_markdown": "paper_report",
+    "elevation_map": "camera_masks",
+    "ground_mask": "camera_masks",
+    "EXTRACTORS": "extractors",
+    "make_extractor": "extractors",
+    "SmallCNNTrainConfig": "small_cnn_training",
+    "train_small_cnn_job": "small_cnn_training",
+    "BENCHMARKS": "benchmarks",
+    "benchmark": "benchmarks",
 }
 __all__ = [
     "GSE_GRID",

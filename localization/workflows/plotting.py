@@ -1,4 +1,8 @@
-"""Figures of a closed-loop tracking run (matplotlib, Agg backend).
+"""Figures of the workflows (matplotlib, Agg backend): a driven route, a closed-loop
+tracking run.
+
+:func:`plot_route` writes the city map with a driven route and a strip of camera images
+along it (``appearance-nav demo``).
 
 :func:`plot_track` writes one PNG per run: the top-down city map with the true path, the
 belief path with 2-sigma covariance ellipses and the dead-reckoning path (F alone from the
@@ -20,6 +24,8 @@ from matplotlib.patches import Ellipse
 from scipy.stats import chi2
 
 from localization.workflows.tracking import TrackResult, track_metrics
+
+__all__ = ["COLORS", "covariance_ellipse", "plot_route", "plot_track"]
 
 COLORS = {"true": "black", "belief": "tab:red", "dead_reckoning": "tab:blue"}
 
@@ -112,6 +118,54 @@ def plot_track(run: TrackResult, top_down: np.ndarray, bounds: tuple[float, floa
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def plot_route(env: Any, images: np.ndarray, poses: np.ndarray, n_strip: int,
+               path: str | Path) -> Path:
+    """Top-down map with the driven route and the frames of the strip marked, plus the strip.
+
+    Parameters
+    ----------
+    env : an ``AppearanceNav-v0`` env (its city map is rendered top-down).
+    images : (n, H, W, 3) uint8 camera images along the route.
+    poses : (n, 3) poses ``[x, y, yaw]`` of the images.
+    n_strip : camera images shown below the map (evenly spaced along the route).
+    path : the PNG written.
+
+    Returns
+    -------
+    ``path`` as a :class:`~pathlib.Path`.
+    """
+    path = Path(path)
+    base = env.unwrapped
+    lo, hi = base.city.bounds
+    top = base.render()
+    picks = np.linspace(0, len(poses) - 1, n_strip).round().astype(int)
+    fig = plt.figure(figsize=(2.0 * n_strip, 2.0 * n_strip / 2 + 2.4))
+    grid = fig.add_gridspec(2, n_strip, height_ratios=[n_strip / 2, 1])
+    ax = fig.add_subplot(grid[0, :])
+    ax.imshow(top, extent=(lo, hi, lo, hi))
+    ax.plot(poses[:, 0], poses[:, 1], "-", color="tab:orange", lw=1.5, label="driven route")
+    for k, i in enumerate(picks):
+        x, y, yaw = poses[i]
+        ax.annotate("", (x + 0.8 * np.cos(yaw), y + 0.8 * np.sin(yaw)), (x, y),
+                    arrowprops={"arrowstyle": "->", "color": "tab:cyan", "lw": 1.5})
+        ax.text(x, y, f" {k + 1}", color="white", fontsize=9, weight="bold")
+    ax.set_title(f"city {base.city.seed}: {len(poses)} frames along the route "
+                 f"({np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T)):.0f} m)")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.legend(loc="upper right", fontsize=8)
+    for k, i in enumerate(picks):
+        a = fig.add_subplot(grid[1, k])
+        a.imshow(images[i])
+        a.set_title(f"{k + 1}: ({poses[i, 0]:.1f}, {poses[i, 1]:.1f}, "
+                    f"{np.degrees(poses[i, 2]):.0f}°)", fontsize=7)
+        a.axis("off")
+    fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path

@@ -1,6 +1,7 @@
 """Closed-loop tracking: fit a localizer for a city, drive its route on the belief, score it.
 
-Shared by ``scripts/track.py``, ``scripts/demo.py``, ``scripts/bench_filter.py`` and the tests.
+Shared by the tracking runs (:mod:`.track_runs`), the demo (:mod:`.demo`), the filter
+benchmark (:mod:`.benchmarks.filter`) and the tests.
 
 - :func:`fit_city_localizer`: the whole fit on one city: images around the driving lanes
   (``envs.collect_dataset(mode="lanes")``), :meth:`AppearanceLocalizer.fit`, a drive on the

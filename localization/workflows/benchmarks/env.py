@@ -1,10 +1,9 @@
-"""Benchmark of AppearanceNav-v0: env steps/s vs a raw MuJoCo step+render loop.
+"""Benchmark of AppearanceNav-v0: env steps/s vs a raw MuJoCo step+render loop
+(``appearance-nav bench --only env``; its options are ``--env-<option>``).
 
-CleanRL style: one file, every setting in ``Args`` (``--help`` lists them), results in files.
-
-    python scripts/bench_env.py                 # perspective camera, 64/96/128 px
-    python scripts/bench_env.py --cameras       # every registered camera
-    python scripts/bench_env.py --quick         # smoke run
+    appearance-nav bench --only env                    # every registered camera, 64/96/128 px
+    appearance-nav bench --only env --no-env-cameras   # perspective camera only
+    appearance-nav bench --only env --env-quick        # smoke run
 
 What is measured
 ----------------
@@ -28,15 +27,10 @@ import dataclasses
 import json
 import os
 import platform
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
 
 import envs  # chooses MUJOCO_GL before mujoco is imported
 
@@ -50,11 +44,14 @@ from envs.robot import HALF_TRACK, WHEEL_RADIUS
 
 TARGET_STEPS_PER_S = 1000.0
 TARGET_RATIO = 0.8
-from cli import parse_dataclass_args
+
+__all__ = ["TARGET_RATIO", "TARGET_STEPS_PER_S", "EnvBenchConfig", "run_env_bench"]
 
 
 @dataclass
-class Args:
+class EnvBenchConfig:
+    """Settings of the env benchmark."""
+
     sizes: str = field(default="64,96,128", metadata={"help": "comma-separated square image sides"})
     steps: int = field(default=3000, metadata={"help": "timed steps per loop (env and raw each)"})
     chunk: int = field(default=100, metadata={"help": "env and raw alternate every this many steps"})
@@ -66,12 +63,11 @@ class Args:
     out_dir: str = field(default="results", metadata={"help": "where bench_env.json / bench_env.md go"})
 
 
-def parse_args(argv: list[str] | None = None) -> Args:
-    """Parse ``--field-name value`` options (booleans are flags) from the fields of ``Args``."""
-    args = parse_dataclass_args(Args, __doc__, argv)
-    if args.quick:
-        args.sizes, args.steps, args.chunk, args.warmup = "64", 400, 50, 10
-    return args
+    def resolved(self) -> EnvBenchConfig:
+        """The settings actually run (``quick``: 64 px, 400 steps in chunks of 50)."""
+        if not self.quick:
+            return self
+        return dataclasses.replace(self, sizes="64", steps=400, chunk=50, warmup=10)
 
 
 class EnvLoop:
@@ -137,7 +133,7 @@ class RawLoop:
             self.camera.close()
 
 
-def bench_one(camera: str, size: int, args: Args) -> dict[str, Any]:
+def bench_one(camera: str, size: int, args: EnvBenchConfig) -> dict[str, Any]:
     env = gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, camera=camera, image_size=(size, size),
                    max_episode_steps=10**9)
     env.action_space.seed(args.seed)
@@ -196,8 +192,9 @@ def markdown(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
-    args = parse_args(argv)
+def run_env_bench(args: EnvBenchConfig) -> list[dict[str, Any]]:
+    """Run the benchmark; write ``bench_env.json`` / ``bench_env.md``; return the rows."""
+    args = args.resolved()
     sizes = [int(s) for s in args.sizes.split(",")]
     cameras = ["perspective"] + (sorted(set(envs.CAMERAS) - {"perspective"}) if args.cameras else [])
     probe = envs.AppearanceNavEnv(scene_seed=args.scene_seed)
@@ -224,6 +221,3 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     (out / "bench_env.md").write_text(table)
     return rows
 
-
-if __name__ == "__main__":
-    main()

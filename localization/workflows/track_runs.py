@@ -1,10 +1,6 @@
-"""Closed-loop tracking on the pose belief: drive the city's route with a pure-pursuit
-controller on the belief mean, for each measurement model, against dead reckoning.
-
-CleanRL style: one file, every setting a field of ``Args`` (``--help`` lists them).
-
-    python scripts/track.py                               # default city, fits a localizer
-    python scripts/track.py --localizer results/localizer.npz --steps 2000
+"""Closed-loop tracking runs on the pose belief (``appearance-nav track``): drive the city's
+route with a pure-pursuit controller on the belief mean, for each measurement model and start
+point, against dead reckoning.
 
 For each measurement model and start point it writes ``<out>/track_<model>_<start>.png``
 (top-down map with the true path, the belief with 2-sigma ellipses and the dead-reckoning
@@ -17,22 +13,17 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import sys
 import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
 
 import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
 
 # isort: split
 import gymnasium as gym
 import numpy as np
-from cli import parse_dataclass_args
+from tqdm import tqdm
 
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer
 from localization.workflows.plotting import plot_track
@@ -43,9 +34,13 @@ from localization.workflows.tracking import (
     track_route,
 )
 
+__all__ = ["TrackConfig", "run_tracking", "summarize_runs", "track_markdown"]
+
 
 @dataclass
-class Args:
+class TrackConfig:
+    """Settings of the tracking runs (the options of ``appearance-nav track``)."""
+
     scene_seed: int = field(default=0, metadata={"help": "names the city"})
     camera: str = field(default="perspective", metadata={"help": "camera of the env"})
     image_size: int = field(default=64, metadata={"help": "side of the square camera image"})
@@ -65,18 +60,15 @@ class Args:
     out: str = field(default="results", metadata={"help": "output folder"})
 
 
-def parse_args(argv: list[str] | None = None) -> Args:
-    """Parse ``--field-name value`` options built from the fields of ``Args``."""
-    return parse_dataclass_args(Args, __doc__, argv)
-
-
-def make_env(args: Args) -> gym.Env:
+def make_env(args: TrackConfig) -> gym.Env:
+    """The env of the runs (no time limit)."""
     return gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, camera=args.camera,
                     image_size=(args.image_size, args.image_size),
                     motion_noise=args.motion_noise, max_episode_steps=None)
 
 
-def get_localizer(env: gym.Env, args: Args, out: Path) -> tuple[AppearanceLocalizer, dict]:
+def get_localizer(env: gym.Env, args: TrackConfig, out: Path
+                  ) -> tuple[AppearanceLocalizer, dict]:
     """Load ``args.localizer`` or fit one on the city (saved to ``out/localizer.npz``)."""
     if args.localizer:
         return AppearanceLocalizer.load(args.localizer), {}
@@ -88,7 +80,8 @@ def get_localizer(env: gym.Env, args: Args, out: Path) -> tuple[AppearanceLocali
     return loc, seconds
 
 
-def markdown(rows: list[dict], summary: dict) -> str:
+def track_markdown(summary: dict) -> str:
+    """The markdown table of :func:`summarize_runs`."""
     lines = [("| model | runs x steps | belief RMSE (m) | dead reckoning RMSE (m) | ratio | "
               "heading RMSE (rad) | mean NEES [95 % band] | accepted | ms/step |"),
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
@@ -101,7 +94,7 @@ def markdown(rows: list[dict], summary: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def summarize(rows: list[dict]) -> dict:
+def summarize_runs(rows: list[dict]) -> dict:
     """Per model: RMSE pooled over runs (root of the mean squared error), mean NEES over
     runs with the band of :func:`nees_band` for that number of runs."""
     out = {}
@@ -120,8 +113,8 @@ def summarize(rows: list[dict]) -> dict:
     return out
 
 
-def run(args: Args, env: gym.Env | None = None, localizer: AppearanceLocalizer | None = None
-        ) -> dict:
+def run_tracking(args: TrackConfig, env: gym.Env | None = None,
+               localizer: AppearanceLocalizer | None = None) -> dict:
     """Track every (model, start); write PNGs, JSON and markdown; return the results."""
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -132,20 +125,21 @@ def run(args: Args, env: gym.Env | None = None, localizer: AppearanceLocalizer |
     base = env.unwrapped
     rows = []
     t0 = time.perf_counter()
-    for name in args.measurements.split(","):
-        for start in (int(s) for s in args.starts.split(",")):
-            result = track_route(env, localizer, name, args.steps, start=start,
-                                 seed=args.seed + 100 + start)
-            m = track_metrics(result)
-            base.set_pose(result.true[0])  # the map shows the robot at the start
-            png = plot_track(result, base.render(), base.city.bounds,
-                             out / f"track_{name}_{start}.png")
-            rows.append({"measurement": name, "start": start, **m, "png": str(png)})
-            print(f"{name:>14} start {start:>5}: RMSE {m['rmse']:.3f} m, dead reckoning "
-                  f"{m['rmse_dead_reckoning']:.2f} m (ratio {m['ratio']:.3f}), NEES "
-                  f"{m['nees_mean']:.2f}, accepted {m['accepted']:.2f}", flush=True)
+    runs = [(name, int(s)) for name in args.measurements.split(",")
+            for s in args.starts.split(",")]
+    for name, start in tqdm(runs, desc="tracking runs", unit="run"):
+        result = track_route(env, localizer, name, args.steps, start=start,
+                             seed=args.seed + 100 + start)
+        m = track_metrics(result)
+        base.set_pose(result.true[0])  # the map shows the robot at the start
+        png = plot_track(result, base.render(), base.city.bounds,
+                         out / f"track_{name}_{start}.png")
+        rows.append({"measurement": name, "start": start, **m, "png": str(png)})
+        tqdm.write(f"{name:>14} start {start:>5}: RMSE {m['rmse']:.3f} m, dead reckoning "
+                   f"{m['rmse_dead_reckoning']:.2f} m (ratio {m['ratio']:.3f}), NEES "
+                   f"{m['nees_mean']:.2f}, accepted {m['accepted']:.2f}")
     seconds["track"] = time.perf_counter() - t0
-    summary = summarize(rows)
+    summary = summarize_runs(rows)
     result = {"args": dataclasses.asdict(args), "seconds": seconds, "runs": rows,
               "summary": summary,
               "noise": {"control_gain": localizer.control_gain_.tolist(),
@@ -153,14 +147,6 @@ def run(args: Args, env: gym.Env | None = None, localizer: AppearanceLocalizer |
                         "correlation_time": {k: v[:3].tolist() for k, v in
                                              localizer.correlation_time_.items()}}}
     (out / "track.json").write_text(json.dumps(result, indent=2))
-    (out / "track.md").write_text(markdown(rows, summary))
-    print(markdown(rows, summary))
+    (out / "track.md").write_text(track_markdown(summary))
+    print(track_markdown(summary))
     return result
-
-
-def main(argv: list[str] | None = None) -> dict:
-    return run(parse_args(argv))
-
-
-if __name__ == "__main__":
-    main()

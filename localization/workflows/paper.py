@@ -1,14 +1,10 @@
-"""Reproduce section V of the paper (Tables 1-2, Figs. 2-3) on the simulated city.
+"""Section V of the paper (Tables 1-2, Figs. 2-3) reproduced on the simulated city
+(``appearance-nav reproduce``).
 
-CleanRL style: every setting is a field of ``Args``, overridable as ``--field value``::
-
-    python scripts/reproduce_paper.py            # full run, <= 30 min on 2 cores
-    python scripts/reproduce_paper.py --quick    # <= 3 min: small data, fewer features
-
-For each camera (perspective, fisheye, catadioptric) of city ``--scene-seed`` it collects
+For each camera (perspective, fisheye, catadioptric) of city ``scene_seed`` it collects
 n images along the robot's closed route (the paper's setting: a vehicle trajectory,
 position only) and n images at random 3-DoF poses, splits each 70/30 at random, and writes
-to ``--out``:
+to ``out``:
 
 - Table 1: intrinsic dimension of the raw route images (global: Isomap residual variance,
   local: correlation dimension, pointwise: Levina-Bickel MLE);
@@ -25,42 +21,38 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import sys
 import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import envs  # chooses MUJOCO_GL before mujoco is imported
+
+# isort: split
+import gymnasium as gym
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-import gymnasium as gym
-
-import envs
-from envs.projections import projection_directions
-from envs.robot import CAMERA_FOVY, CAMERA_HEIGHT
-from localization.features import EfficientNetFeatures, PixelPCA
-from localization.features.small_cnn import SmallCNNFeatures
-from localization.features.weights import small_cnn_weights
+from localization.features import PixelPCA
 from localization.intrinsic_dim import intrinsic_dimension_table
+from localization.workflows import paper_report
 from localization.workflows.experiment import evaluate_methods, fit_gse
+from localization.workflows.extractors import make_extractor
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import paper_report
+__all__ = ["CAMERAS", "FEATURE_DIMS", "PaperConfig", "run_paper"]
 
 CAMERAS = ("perspective", "fisheye", "catadioptric")
 #: Feature dimensions (leading PCA components) tried by the CV of every method on the route
 #: data (the paper's setting); the random 3-DoF data use all ``n_components`` (the 30-minute
 #: budget: GSE fits with q=3 dominate the run).
 FEATURE_DIMS = (16, 32)
-from cli import parse_dataclass_args
 
 
 @dataclass
-class Args:
+class PaperConfig:
+    """Settings of the experiment (the options of ``appearance-nav reproduce``)."""
+
     quick: bool = field(default=False, metadata={
         "help": "small version (n=500, PixelPCA and SmallCNN only, small CV grid) for tests"})
     cameras: str = field(default=",".join(CAMERAS), metadata={"help": "comma-separated cameras"})
@@ -86,51 +78,25 @@ class Args:
     num_threads: int = field(default=2, metadata={"help": "torch threads for CNN features"})
     out: str = field(default="results/paper", metadata={"help": "output directory"})
 
-
-def parse_args(argv: list[str] | None = None) -> Args:
-    """Command-line parser generated from the ``Args`` dataclass fields."""
-    args = parse_dataclass_args(Args, __doc__, argv)
-    if args.quick:
-        args = dataclasses.replace(args, n=min(args.n, 500), cv=2, intrinsic_samples=400,
+    def resolved(self) -> PaperConfig:
+        """The settings actually run: ``quick`` shrinks n, the CV, the Table 1 subsample and
+        the feature list."""
+        if not self.quick:
+            return self
+        return dataclasses.replace(self, n=min(self.n, 500), cv=2, intrinsic_samples=400,
                                    features="pixel_pca,small_cnn")
-    return args
 
 
-def elevation_map(camera: str, size: int) -> np.ndarray:
-    """Elevation (degrees above the horizontal) of every pixel's ray, NaN outside the image."""
-    if camera == "perspective":
-        f = (size / 2) / np.tan(np.radians(CAMERA_FOVY) / 2)
-        c = size / 2 - (np.arange(size) + 0.5)  # up / right from the centre
-        up, right = np.meshgrid(c, -c, indexing="ij")
-        return np.degrees(np.arctan2(up, np.hypot(right, f)))
-    d, valid = projection_directions(camera, size)
-    el = np.degrees(np.arcsin(np.clip(d[..., 1], -1.0, 1.0)))
-    el[~valid] = np.nan
-    return el
-
-
-def ground_mask(camera: str, size: int, ground_range: float) -> np.ndarray:
-    """Pixels that do not see the ground within ``ground_range`` metres (camera at
-    ``CAMERA_HEIGHT``): the near road texture moves fastest and repeats (lane dashes)."""
-    return elevation_map(camera, size) >= -np.degrees(np.arctan2(CAMERA_HEIGHT, ground_range))
-
-
-def make_extractor(name: str, camera: str, mode: str, args: Args) -> Any:
-    m = args.n_components
-    if name == "pixel_pca":
-        return PixelPCA(m)
-    if name == "pixel_pca_masked":
-        return PixelPCA(m, mask=ground_mask(camera, args.image_size, args.ground_range))
-    if name == "efficientnet":
-        return EfficientNetFeatures(n_components=m, num_threads=args.num_threads)
-    if name == "small_cnn":
-        return SmallCNNFeatures(n_components=m, weights=str(small_cnn_weights(camera, mode)),
-                                num_threads=args.num_threads)
-    raise ValueError(f"unknown feature extractor {name!r}")
+def run_paper(config: PaperConfig) -> dict[str, Any]:
+    """Run the experiment (``config.quick`` applied); BLAS on one thread (GSE's many small
+    matrix products thrash on a shared machine with threaded BLAS), torch on
+    ``num_threads`` for the CNNs. Returns the report also written to ``results.json``."""
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _run(config.resolved())
 
 
 def figure_model(images: np.ndarray, P: np.ndarray, tr: np.ndarray, te: np.ndarray,
-                 args: Args) -> tuple[PixelPCA, Any, np.ndarray, np.ndarray]:
+                 args: PaperConfig) -> tuple[PixelPCA, Any, np.ndarray, np.ndarray]:
     """PixelPCA with ``figure_components`` (its inverse maps features back to images) and
     a GSE regressor (q=1) on the training route images, for Figs. 2-3."""
     pca = PixelPCA(args.figure_components).fit(images[tr])
@@ -142,7 +108,8 @@ def figure_model(images: np.ndarray, P: np.ndarray, tr: np.ndarray, te: np.ndarr
     return pca, gse, images, te
 
 
-def collect(camera: str, mode: str, args: Args) -> tuple[np.ndarray, np.ndarray]:
+def collect(camera: str, mode: str, args: PaperConfig) -> tuple[np.ndarray, np.ndarray]:
+    """``args.n`` images and poses of data set ``mode`` seen by ``camera``."""
     env = gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, camera=camera,
                    image_size=(args.image_size, args.image_size))
     try:
@@ -151,15 +118,16 @@ def collect(camera: str, mode: str, args: Args) -> tuple[np.ndarray, np.ndarray]
         env.close()
 
 
-def main(argv: list[str] | None = None) -> dict[str, Any]:
-    """Run the experiment; BLAS on one thread (GSE's many small matrix products thrash on
-    a shared machine with threaded BLAS), torch on ``--num-threads`` for the CNNs."""
-    args = parse_args(argv)
-    with threadpool_limits(limits=1, user_api="blas"):
-        return run(args)
+def _table1(images: np.ndarray, samples: int) -> dict[str, float]:
+    X = images.reshape(len(images), -1).astype(np.float64) / 255.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tab = intrinsic_dimension_table(
+            X[np.random.default_rng(0).permutation(len(X))[:samples]])
+    return {k: tab[k] for k in ("global", "local", "pointwise")}
 
 
-def run(args: Args) -> dict[str, Any]:
+def _run(args: PaperConfig) -> dict[str, Any]:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
@@ -174,17 +142,14 @@ def run(args: Args) -> dict[str, Any]:
             images, poses = collect(camera, mode, args)
             print(f"{camera} {mode}: {len(images)} images", flush=True)
             if mode == "route":
-                X = images.reshape(len(images), -1).astype(np.float64) / 255.0
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    tab = intrinsic_dimension_table(
-                        X[np.random.default_rng(0).permutation(len(X))[:args.intrinsic_samples]])
-                report["table1"][camera] = {k: tab[k] for k in ("global", "local", "pointwise")}
+                report["table1"][camera] = _table1(images, args.intrinsic_samples)
             P = poses[:, :2] if mode == "route" else poses
             q, periodic = (1, ()) if mode == "route" else (3, (2,))
             for feat in args.features.split(","):
                 t1 = time.perf_counter()
-                extractor = make_extractor(feat, camera, mode, args)
+                extractor = make_extractor(feat, camera, mode, args.n_components,
+                                           args.image_size, args.ground_range,
+                                           args.num_threads)
                 W_tr = extractor.fit_transform(images[tr])
                 W_te = extractor.transform(images[te])
                 t_feat = time.perf_counter() - t1
@@ -211,7 +176,3 @@ def run(args: Args) -> dict[str, Any]:
     (out / "tables.md").write_text(paper_report.tables_markdown(report))
     print(f"wrote {out / 'tables.md'} ({report['timing']['total'] / 60:.1f} min)")
     return report
-
-
-if __name__ == "__main__":
-    main()

@@ -1,9 +1,8 @@
-"""Benchmark of GSERegressor: fit time / memory vs n, query latency, accuracy vs KNR and retrieval.
+"""Benchmark of GSERegressor: fit time / memory vs n, query latency, accuracy vs KNR and
+retrieval (``appearance-nav bench --only gse``; its options are ``--gse-<option>``).
 
-CleanRL style: one file, every setting in ``Args`` (``--help`` lists them), results in files.
-
-    python scripts/bench_gse.py            # full run: n = 1000, 2500, 5000, 10000 (m = 64)
-    python scripts/bench_gse.py --quick    # smoke run: n <= 1000
+    appearance-nav bench --only gse              # full run: n = 1000, 2500, 5000, 10000 (m = 64)
+    appearance-nav bench --only gse --gse-quick  # smoke run: n <= 1000
 
 What is measured
 ----------------
@@ -54,14 +53,16 @@ from typing import Any
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
-from cli import parse_dataclass_args
+__all__ = ["GSEBenchConfig", "run_gse_bench"]
+
+#: the repository (the workers' working directory, the git commit of the report)
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @dataclass
-class Args:
+class GSEBenchConfig:
+    """Settings of the GSE benchmark."""
+
     ns: str = field(default="1000,2500,5000,10000",
                     metadata={"help": "comma-separated training sizes n for the scaling runs"})
     m: int = field(default=64, metadata={"help": "feature dimension m of the synthetic manifold"})
@@ -91,21 +92,22 @@ class Args:
     worker_n: int = field(default=0, metadata={"help": "internal: run one scaling worker"})
     worker_out: str = field(default="", metadata={"help": "internal: worker JSON output path"})
 
-
-def parse_args(argv: list[str] | None = None) -> Args:
-    args = parse_dataclass_args(Args, __doc__, argv)
-    if args.quick:
-        if args.ns == Args.ns:
-            args.ns = "250,500,1000"
-        if args.accuracy_n_train == Args.accuracy_n_train:
-            args.accuracy_n_train, args.accuracy_n_test = 700, 300
-        if args.latency_repeats == Args.latency_repeats:
-            args.latency_repeats = 20
-        if args.latency_n == Args.latency_n:
-            args.latency_n = 1000
-    if not args.out:
-        args.out = "results/bench_gse_quick" if args.quick else "results/bench_gse"
-    return args
+    def resolved(self) -> GSEBenchConfig:
+        """The settings actually run: ``quick`` shrinks the options left at their defaults;
+        an empty ``out`` becomes ``results/bench_gse`` (``results/bench_gse_quick``)."""
+        args = dataclasses.replace(self)
+        if args.quick:
+            if args.ns == GSEBenchConfig.ns:
+                args.ns = "250,500,1000"
+            if args.accuracy_n_train == GSEBenchConfig.accuracy_n_train:
+                args.accuracy_n_train, args.accuracy_n_test = 700, 300
+            if args.latency_repeats == GSEBenchConfig.latency_repeats:
+                args.latency_repeats = 20
+            if args.latency_n == GSEBenchConfig.latency_n:
+                args.latency_n = 1000
+        if not args.out:
+            args.out = "results/bench_gse_quick" if args.quick else "results/bench_gse"
+        return args
 
 
 # ---------------------------------------------------------------- scaling worker
@@ -118,7 +120,7 @@ def _median_time(fn, repeats: int) -> float:
     return float(np.median(times))
 
 
-def run_worker(args: Args) -> dict[str, Any]:
+def run_worker(args: GSEBenchConfig) -> dict[str, Any]:
     """Fit GSE at n = args.worker_n in this (fresh) process and time its queries."""
     from localization.gse.regressor import GSERegressor
     from localization.synthetic import regression_manifold
@@ -172,7 +174,7 @@ def run_worker(args: Args) -> dict[str, Any]:
     return res
 
 
-def run_scaling(args: Args) -> list[dict[str, Any]]:
+def run_scaling(args: GSEBenchConfig) -> list[dict[str, Any]]:
     env = dict(os.environ)
     if args.threads > 0:
         for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -181,13 +183,13 @@ def run_scaling(args: Args) -> list[dict[str, Any]]:
     for n in [int(s) for s in args.ns.split(",") if s.strip()]:
         with tempfile.TemporaryDirectory() as tmp:
             out = Path(tmp) / "worker.json"
-            cmd = [sys.executable, str(Path(__file__).resolve()), "--worker-n", str(n),
-                   "--worker-out", str(out), "--m", str(args.m), "--seed", str(args.seed),
-                   "--map-seed", str(args.map_seed), "--n-neighbors", str(args.n_neighbors),
-                   "--batch-size", str(args.batch_size),
-                   "--latency-repeats", str(args.latency_repeats)]
-            if args.tracemalloc:
-                cmd.append("--tracemalloc")
+            worker = GSEBenchConfig(worker_n=n, worker_out=str(out), m=args.m,
+                                    seed=args.seed, map_seed=args.map_seed,
+                                    n_neighbors=args.n_neighbors, batch_size=args.batch_size,
+                                    latency_repeats=args.latency_repeats,
+                                    tracemalloc=args.tracemalloc)
+            cmd = [sys.executable, "-m", __spec__.name if __spec__ else __name__,
+                   json.dumps(dataclasses.asdict(worker))]
             print(f"[scaling] n = {n} ...", flush=True)
             try:
                 proc = subprocess.run(cmd, check=False, env=env, cwd=ROOT,
@@ -236,7 +238,7 @@ def _lift_pose(T: np.ndarray) -> np.ndarray:
     return T
 
 
-def run_accuracy(args: Args) -> list[dict[str, Any]]:
+def run_accuracy(args: GSEBenchConfig) -> list[dict[str, Any]]:
     from localization.baselines import KernelRegressor, RetrievalRegressor
     from localization.gse.regressor import GSERegressor
     from localization.metrics import angular_rmse, rrmse
@@ -292,7 +294,7 @@ def _f(x: Any, fmt: str = "{:.3f}") -> str:
     return "-" if x is None else fmt.format(x)
 
 
-def targets(args: Args, scaling: list[dict[str, Any]], expo: float | None) -> list[dict]:
+def targets(args: GSEBenchConfig, scaling: list[dict[str, Any]], expo: float | None) -> list[dict]:
     by_n = {r["n"]: r for r in scaling if "fit_s" in r}
     out = []
 
@@ -315,7 +317,7 @@ def targets(args: Args, scaling: list[dict[str, Any]], expo: float | None) -> li
     return out
 
 
-def markdown(args: Args, res: dict[str, Any]) -> str:
+def markdown(args: GSEBenchConfig, res: dict[str, Any]) -> str:
     lines = [f"# GSE benchmark ({'quick' if args.quick else 'full'} run, {res['meta']['date']})",
              "", (f"Synthetic regression manifold, m = {args.m}, GSE n_neighbors = "
              f"{args.n_neighbors}; {res['meta']['cpu_count']} CPUs, threads = "
@@ -368,11 +370,13 @@ def markdown(args: Args, res: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
+def run_gse_bench(args: GSEBenchConfig) -> dict[str, Any]:
+    """Run the benchmark (scaling workers in fresh subprocesses, then the accuracy part in
+    this process); write ``<out>.json`` / ``<out>.md``; return the result."""
+    args = args.resolved()
     if args.worker_n:
         Path(args.worker_out).write_text(json.dumps(run_worker(args)))
-        return 0
+        return {}
     import numpy
     import scipy
     import sklearn
@@ -399,7 +403,7 @@ def main(argv: list[str] | None = None) -> int:
     res["targets"] = targets(args, res["scaling"], res["growth_exponent"]) \
         if res["scaling"] else []
     res["meta"]["total_s"] = time.perf_counter() - t0
-    out = ROOT / args.out if not Path(args.out).is_absolute() else Path(args.out)
+    out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.with_suffix(".json").write_text(json.dumps(res, indent=2, default=float))
     md = markdown(args, res)
@@ -410,8 +414,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{t['status']:8s} {t['target']}: {_f(t['value'], '{:.3f}')}{u} "
               f"(limit {t['limit']:g}{u})")
     print(f"\nwrote {out.with_suffix('.json')} and {out.with_suffix('.md')}")
-    return 0
+    return res
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+if __name__ == "__main__":  # a scaling worker: python -m ... '<GSEBenchConfig as JSON>'
+    run_gse_bench(GSEBenchConfig(**json.loads(sys.argv[1])))

@@ -1,17 +1,13 @@
-"""Evaluate the navigators on each pose source: success, path ratio, collisions, time to goal.
-
-CleanRL style: one file, every setting a field of ``Args`` (``--help`` lists them).
-
-    python scripts/eval_agents.py --episodes 100
-    python scripts/eval_agents.py --agents scripted --sources oracle,dead_reckoning
+"""Evaluate navigators on pose sources: success, path ratio, collisions, time to goal
+(``appearance-nav eval``).
 
 For every agent (the scripted street navigator; PPO policies trained by
-``scripts/train_agent.py``, each evaluated on the pose source it was trained on) and pose
+``appearance-nav train``, each evaluated on the pose source it was trained on) and pose
 source (oracle = true pose, belief = the GSE/EKF belief from images, dead_reckoning = the
 motion model alone), the same ``episodes`` resets (start pose and goal, seeds
 ``seed .. seed + episodes - 1``, disjoint from the training and evaluation resets of
-``train_agent.py``) are run. Writes ``<out>/agents.md`` (table) and ``<out>/agents.json``
-(summary and every episode).
+``appearance-nav train``) are run. Writes ``<out>/agents.md`` (table) and
+``<out>/agents.json`` (summary and every episode).
 
 Columns: success rate (goal reached before truncation), path ratio (distance driven / shortest
 street path, over successes), collision episodes (share of episodes with any contact), time
@@ -22,14 +18,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
 
 import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
 
@@ -40,20 +31,26 @@ from agents.scripted import ScriptedAgent
 from agents.sources import POSE_SOURCES, make_pose_env
 from localization.localizer import AppearanceLocalizer
 
+__all__ = ["AGENTS", "EvalConfig", "agents_table", "evaluate_agents"]
+
+#: the navigators :func:`evaluate_agents` knows
 AGENTS = ("scripted", "ppo")
-from cli import parse_dataclass_args
 
 
 @dataclass
-class Args:
-    agents: str = field(default="scripted,ppo", metadata={"help": "comma-separated: scripted, ppo"})
+class EvalConfig:
+    """Settings of the evaluation (the options of ``appearance-nav eval``)."""
+
+    agents: str = field(default="scripted,ppo", metadata={
+        "help": "comma-separated: scripted, ppo"})
     sources: str = field(default=",".join(POSE_SOURCES), metadata={
         "help": "comma-separated pose sources: " + ", ".join(POSE_SOURCES)})
     localizer: str = field(default="results/localizer.npz", metadata={
         "help": "fitted AppearanceLocalizer (belief and dead_reckoning)"})
-    measurement: str = field(default="", metadata={"help": "belief measurement model (empty: default)"})
+    measurement: str = field(default="", metadata={
+        "help": "belief measurement model (empty: default)"})
     policies: str = field(default="results/agents", metadata={
-        "help": "folder with <source>/policy.pt from train_agent.py"})
+        "help": "folder with <source>/policy.pt from appearance-nav train"})
     scene_seed: int = field(default=0, metadata={"help": "the city"})
     camera: str = field(default="perspective", metadata={"help": "env camera"})
     image_size: int = field(default=64, metadata={"help": "side of the square camera image"})
@@ -67,17 +64,7 @@ class Args:
     out: str = field(default="results", metadata={"help": "where agents.md / agents.json go"})
 
 
-def parse_args(argv: list[str] | None = None) -> Args:
-    """Parse ``--field-name value`` options built from the fields of ``Args``."""
-    args = parse_dataclass_args(Args, __doc__, argv)
-    for name, known in (("agents", AGENTS), ("sources", POSE_SOURCES)):
-        bad = set(getattr(args, name).split(",")) - set(known)
-        if bad:
-            raise SystemExit(f"unknown {name} {sorted(bad)}; choose from {known}")
-    return args
-
-
-def table(rows: list[dict]) -> str:
+def agents_table(rows: list[dict]) -> str:
     """The markdown table of the summaries."""
     header = ("| agent | pose source | episodes | success rate | path ratio | collision episodes "
               "| time to goal (s) | belief RMSE (m) |")
@@ -89,8 +76,9 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> list[dict]:
-    args = parse_args(argv)
+def evaluate_agents(args: EvalConfig) -> list[dict]:
+    """Run every agent on every pose source; write ``agents.md`` / ``agents.json`` to
+    ``args.out``; return one summary row per (agent, source)."""
     sources = args.sources.split(",")
     localizer = None
     if set(sources) - {"oracle"}:
@@ -110,7 +98,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
             else:
                 policy = Path(args.policies) / source / "policy.pt"
                 if not policy.exists():
-                    print(f"skipping ppo on {source}: no {policy} (run scripts/train_agent.py)")
+                    print(f"skipping ppo on {source}: no {policy} (run appearance-nav train)")
                     continue
                 agent = PPOAgent.load(policy, city)
             t0 = time.perf_counter()
@@ -119,20 +107,16 @@ def main(argv: list[str] | None = None) -> list[dict]:
                        "wall_seconds": round(time.perf_counter() - t0, 1)}
             rows.append(summary)
             episodes[f"{name}/{source}"] = as_records(runs)
-            print(table([summary]).splitlines()[-1], flush=True)
+            print(agents_table([summary]).splitlines()[-1], flush=True)
         env.close()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     md = (f"# Navigation on the pose belief\n\nCity {args.scene_seed}, {args.camera} "
           f"{args.image_size}x{args.image_size}, motion noise {args.motion_noise}, "
           f"{args.episodes} episodes (reset seeds {args.seed}..), truncation at "
-          f"{args.max_episode_steps} steps.\n\n{table(rows)}\n")
+          f"{args.max_episode_steps} steps.\n\n{agents_table(rows)}\n")
     (out / "agents.md").write_text(md)
     (out / "agents.json").write_text(json.dumps({"args": dataclasses.asdict(args), "rows": rows,
                                                   "episodes": episodes}, indent=1))
     print(md)
     return rows
-
-
-if __name__ == "__main__":
-    main()

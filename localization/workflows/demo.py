@@ -1,9 +1,5 @@
-"""The main job (``make demo``): the whole pipeline on the default city.
-
-CleanRL style: one file, every setting a field of ``Args`` (``--help`` lists them).
-
-    python scripts/demo.py                 # default city (scene seed 0), results/ as output
-    python scripts/demo.py --scene-seed 3 --lanes route
+"""The main job (``make demo``, ``appearance-nav demo``): the whole pipeline on the default
+city.
 
 Stages:
 
@@ -11,54 +7,47 @@ Stages:
    in "route" mode), save the dataset to ``<out>/route_dataset.npz`` and write
    ``<out>/demo_route.png``: the map with the driven route beside camera images along it;
 2. collect training images around the driving lanes (every street both ways and every turn
-   with ``--lanes streets``, so agents can use the localizer anywhere; only the route's with
-   ``--lanes route``) and fit the :class:`AppearanceLocalizer` (features + GSE); estimate the
+   with ``lanes="streets"``, so agents can use the localizer anywhere; only the route's with
+   ``lanes="route"``) and fit the :class:`AppearanceLocalizer` (features + GSE); estimate the
    noise model on a drive where the lanes go (random street tours, or around the route) and
    calibrate it on a drive on the belief
-   (``localization.workflows.tracking.fit_city_localizer``); save it to ``<out>/localizer.npz``;
-3. closed-loop tracking: for each measurement model drive ``--steps`` steps of the route
+   (:func:`localization.workflows.tracking.fit_city_localizer`); save it to
+   ``<out>/localizer.npz``;
+3. closed-loop tracking: for each measurement model drive ``steps`` steps of the route
    with a pure-pursuit controller on the belief mean, against dead reckoning; write
    ``<out>/track_<model>.png`` and print the results table (also ``<out>/demo.md``);
-4. navigation: the scripted agent (street planner + pure pursuit) drives ``--episodes``
+4. navigation: the scripted agent (street planner + pure pursuit) drives ``episodes``
    seeded episodes to random goals on each pose source (true pose, belief, dead reckoning;
-   ``scripts/eval_agents.py``), table in ``<out>/demo_agents/agents.md``.
+   :func:`localization.workflows.navigation.evaluate_agents`), table in
+   ``<out>/demo_agents/agents.md``.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import sys
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[1]
-for p in (ROOT, ROOT / "scripts"):
-    if str(p) not in sys.path:
-        sys.path.insert(0, str(p))
 
 import envs  # chooses MUJOCO_GL before mujoco is imported
 
 # isort: split
-import warnings
-
-import eval_agents
 import gymnasium as gym
-import matplotlib
-import numpy as np
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
-from cli import parse_dataclass_args
 
 from localization.localizer import MEASUREMENTS
-from localization.workflows.plotting import plot_track
+from localization.workflows.navigation import EvalConfig, evaluate_agents
+from localization.workflows.plotting import plot_route, plot_track
 from localization.workflows.tracking import fit_city_localizer, track_metrics, track_route
+
+__all__ = ["DemoConfig", "demo_table", "run_demo"]
 
 
 @dataclass
-class Args:
+class DemoConfig:
+    """Settings of the demo (the options of ``appearance-nav demo``)."""
+
     scene_seed: int = field(default=0, metadata={"help": "names the city (0 = the default city)"})
     camera: str = field(default="perspective", metadata={
         "help": "a registered camera: " + ", ".join(sorted(envs.CAMERAS))})
@@ -78,46 +67,8 @@ class Args:
     out: str = field(default="results", metadata={"help": "output folder"})
 
 
-def parse_args(argv: list[str] | None = None) -> Args:
-    """Parse ``--field-name value`` options built from the fields of ``Args``."""
-    return parse_dataclass_args(Args, __doc__, argv)
-
-
-def plot_route(env: gym.Env, images: np.ndarray, poses: np.ndarray, n_strip: int,
-               path: Path) -> Path:
-    """Top-down map with the driven route and the frames of the strip marked, plus the strip."""
-    base = env.unwrapped
-    lo, hi = base.city.bounds
-    top = base.render()
-    picks = np.linspace(0, len(poses) - 1, n_strip).round().astype(int)
-    fig = plt.figure(figsize=(2.0 * n_strip, 2.0 * n_strip / 2 + 2.4))
-    grid = fig.add_gridspec(2, n_strip, height_ratios=[n_strip / 2, 1])
-    ax = fig.add_subplot(grid[0, :])
-    ax.imshow(top, extent=(lo, hi, lo, hi))
-    ax.plot(poses[:, 0], poses[:, 1], "-", color="tab:orange", lw=1.5, label="driven route")
-    for k, i in enumerate(picks):
-        x, y, yaw = poses[i]
-        ax.annotate("", (x + 0.8 * np.cos(yaw), y + 0.8 * np.sin(yaw)), (x, y),
-                    arrowprops={"arrowstyle": "->", "color": "tab:cyan", "lw": 1.5})
-        ax.text(x, y, f" {k + 1}", color="white", fontsize=9, weight="bold")
-    ax.set_title(f"city {base.city.seed}: {len(poses)} frames along the route "
-                 f"({np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T)):.0f} m)")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.legend(loc="upper right", fontsize=8)
-    for k, i in enumerate(picks):
-        a = fig.add_subplot(grid[1, k])
-        a.imshow(images[i])
-        a.set_title(f"{k + 1}: ({poses[i, 0]:.1f}, {poses[i, 1]:.1f}, "
-                    f"{np.degrees(poses[i, 2]):.0f}°)", fontsize=7)
-        a.axis("off")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
-
-
-def results_table(rows: list[dict]) -> str:
+def demo_table(rows: list[dict]) -> str:
+    """The markdown table of the tracking rows."""
     lines = [("| measurement model | steps | belief RMSE (m) | dead reckoning RMSE (m) | ratio | "
               "heading RMSE (rad) | mean NEES | accepted | ms/step |"),
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
@@ -128,8 +79,19 @@ def results_table(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main(argv: list[str] | None = None) -> dict:
-    args = parse_args(argv)
+def _navigate(args: DemoConfig, out: Path) -> list[dict]:
+    """Stage 4: the scripted agent on every pose source."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
+        return evaluate_agents(EvalConfig(
+            agents="scripted", episodes=args.episodes, localizer=str(out / "localizer.npz"),
+            scene_seed=args.scene_seed, camera=args.camera, image_size=args.image_size,
+            motion_noise=args.motion_noise, out=str(out / "demo_agents")))
+
+
+def run_demo(args: DemoConfig) -> dict:
+    """Run the four stages; write the dataset, the localizer, PNGs, ``demo.md`` and
+    ``demo.json`` to ``args.out``; return the summary of ``demo.json``."""
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -165,18 +127,12 @@ def main(argv: list[str] | None = None) -> dict:
               f"{m['rmse_dead_reckoning']:.2f} m", flush=True)
     seconds["track"] = time.perf_counter() - t1
     env.close()
-    table = results_table(rows)
+    table = demo_table(rows)
     (out / "demo.md").write_text(table)
     navigation = []
     if args.episodes > 0:
         t1 = time.perf_counter()
-        with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
-            navigation = eval_agents.main([
-                "--agents", "scripted", "--episodes", str(args.episodes),
-                "--localizer", str(out / "localizer.npz"), "--scene-seed", str(args.scene_seed),
-                "--camera", args.camera, "--image-size", str(args.image_size),
-                "--motion-noise", str(args.motion_noise), "--out", str(out / "demo_agents")])
+        navigation = _navigate(args, out)
         seconds["navigate"] = time.perf_counter() - t1
     seconds["total"] = time.perf_counter() - t0
     summary = {"dataset": str(dataset), "route_png": str(figure), "frames": len(poses),
@@ -191,7 +147,3 @@ def main(argv: list[str] | None = None) -> dict:
     print(table)
     print(f"[demo] done in {seconds['total']:.0f} s; PNGs and JSON in {out}/")
     return summary
-
-
-if __name__ == "__main__":
-    main()

@@ -1,9 +1,8 @@
-"""Benchmark of the pose belief: the wrapper's per-step cost and closed-loop tracking accuracy.
+"""Benchmark of the pose belief: the wrapper's per-step cost and closed-loop tracking accuracy
+(``appearance-nav bench --only filter``; its options are ``--filter-<option>``).
 
-CleanRL style: one file, every setting in ``Args`` (``--help`` lists them), results in files.
-
-    python scripts/bench_filter.py              # PixelPCA and the DCNN (EfficientNet-Lite0)
-    python scripts/bench_filter.py --quick      # smoke run
+    appearance-nav bench --only filter                  # PixelPCA and the DCNN (EfficientNet-Lite0)
+    appearance-nav bench --only filter --filter-quick   # smoke run
 
 What is measured
 ----------------
@@ -24,15 +23,10 @@ from __future__ import annotations
 import dataclasses
 import json
 import platform
-import sys
 import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
 
 import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
 
@@ -47,11 +41,14 @@ from localization.wrappers import BeliefWrapper
 
 TARGET_MS = {"pixel_pca": 5.0, "efficientnet": 40.0}
 TARGET_RATIO = 0.10
-from cli import parse_dataclass_args
+
+__all__ = ["TARGET_MS", "TARGET_RATIO", "FilterBenchConfig", "run_filter_bench"]
 
 
 @dataclass
-class Args:
+class FilterBenchConfig:
+    """Settings of the filter benchmark."""
+
     scene_seed: int = field(default=0, metadata={"help": "city of the benchmark"})
     motion_noise: float = field(default=0.1, metadata={"help": "env actuation noise"})
     n_train: int = field(default=6000, metadata={"help": "training images (PixelPCA)"})
@@ -69,15 +66,15 @@ class Args:
     out_dir: str = field(default="results", metadata={"help": "where bench_filter.json/.md go"})
 
 
-def parse_args(argv: list[str] | None = None) -> Args:
-    args = parse_dataclass_args(Args, __doc__, argv)
-    if args.quick:
-        args.n_train, args.n_train_dcnn, args.n_drive = 1500, 400, 400
-        args.steps, args.runs, args.overhead_steps, args.chunk = 200, 1, 100, 25
-    return args
+    def resolved(self) -> FilterBenchConfig:
+        """The settings actually run (``quick``: small fits, short runs)."""
+        if not self.quick:
+            return self
+        return dataclasses.replace(self, n_train=1500, n_train_dcnn=400, n_drive=400,
+                                   steps=200, runs=1, overhead_steps=100, chunk=25)
 
 
-def make_env(args: Args) -> gym.Env:
+def make_env(args: FilterBenchConfig) -> gym.Env:
     return gym.make("AppearanceNav-v0", scene_seed=args.scene_seed,
                     motion_noise=args.motion_noise, max_episode_steps=None)
 
@@ -88,7 +85,7 @@ def timed(fn, *a) -> float:
     return time.perf_counter() - t0
 
 
-def overhead(args: Args, loc: AppearanceLocalizer, measurement: str) -> dict:
+def overhead(args: FilterBenchConfig, loc: AppearanceLocalizer, measurement: str) -> dict:
     """Median per-step times (ms): bare env, wrapped env (two envs of the same city, stepped
     alternately), and the wrapper's parts."""
     bare = make_env(args).unwrapped
@@ -153,7 +150,7 @@ def overhead(args: Args, loc: AppearanceLocalizer, measurement: str) -> dict:
             "gse_query_ms": ms(q_t), "ekf_ms": ms(e_t), "steps": len(wrap_t)}
 
 
-def dcnn_localizer(env: gym.Env, args: Args) -> AppearanceLocalizer:
+def dcnn_localizer(env: gym.Env, args: FilterBenchConfig) -> AppearanceLocalizer:
     images, poses = collect_dataset(env, args.n_train_dcnn, "lanes", seed=args.seed,
                                     lanes="route", progress=False)
     loc = AppearanceLocalizer("efficientnet", {"n_components": 64, "progress": False},
@@ -186,8 +183,9 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main(argv: list[str] | None = None) -> dict:
-    args = parse_args(argv)
+def run_filter_bench(args: FilterBenchConfig) -> dict:
+    """Run the benchmark; write ``bench_filter.json`` / ``.md``; return the result."""
+    args = args.resolved()
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     env = make_env(args)
@@ -230,6 +228,3 @@ def main(argv: list[str] | None = None) -> dict:
     env.close()
     return result
 
-
-if __name__ == "__main__":
-    main()

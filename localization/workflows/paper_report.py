@@ -1,5 +1,6 @@
-"""Figures and markdown tables of ``scripts/reproduce_paper.py`` (kept apart so that the
-experiment script stays one readable page)."""
+"""Figures and markdown tables of the paper's experiment (:mod:`.paper`,
+``appearance-nav reproduce``): Figs. 2-3 (reduce-reconstruct and tangent images), Tables 1-2
+beside the paper's numbers, and the JSON encoder of the report."""
 
 from __future__ import annotations
 
@@ -11,6 +12,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+
+__all__ = ["FEATURE_NAMES", "PAPER_TABLE1", "PAPER_TABLE2", "figures", "jsonable",
+           "tables_markdown"]
 
 #: The seed paper's Table I (intrinsic dimension of its 2500 images) and Table II (RRMSE).
 PAPER_TABLE1 = {"perspective": (1, 11, 3), "fisheye": (1, 7, 3), "catadioptric": (1, 11, 3)}

@@ -1,4 +1,6 @@
-"""The paper's experiment end to end, small: ``scripts/reproduce_paper.py --quick``."""
+"""The paper's experiment end to end, small (:func:`localization.workflows.paper.run_paper`
+with ``quick``, run as ``appearance-nav reproduce --quick`` in a fresh process), and its
+settings."""
 
 from __future__ import annotations
 
@@ -10,18 +12,30 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from localization.workflows.paper import PaperConfig
+
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("paper")
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
-           "MKL_NUM_THREADS": "1"}  # the other xdist worker has the second core
-    subprocess.run([sys.executable, str(ROOT / "scripts" / "reproduce_paper.py"), "--quick",
-                    "--out", str(out), "--num-threads", "1"], check=True, cwd=ROOT,
-                   capture_output=True, text=True, timeout=900, env=env)
+           "MKL_NUM_THREADS": "1",  # the other xdist worker has the second core
+           "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    proc = subprocess.run([sys.executable, "-m", "localization.cli", "reproduce", "--quick",
+                           "--out", str(out), "--num-threads", "1"], check=False, cwd=ROOT,
+                          capture_output=True, text=True, timeout=900, env=env)
+    assert proc.returncode == 0, proc.stderr[-3000:]
     return out
+
+
+def test_quick_settings_shrink_the_run() -> None:
+    quick = PaperConfig(quick=True).resolved()
+    assert (quick.n, quick.cv, quick.intrinsic_samples) == (500, 2, 400)
+    assert quick.features == "pixel_pca,small_cnn"
+    assert PaperConfig(quick=True, n=300).resolved().n == 300
+    assert PaperConfig().resolved() == PaperConfig()
 
 
 def test_quick_run_writes_the_tables_and_figures(quick_run: Path) -> None:

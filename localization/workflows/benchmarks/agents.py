@@ -1,15 +1,15 @@
-"""Benchmark: PPO on the GSE belief against PPO on the true pose, same training budget.
+"""Benchmark: PPO on the GSE belief against PPO on the true pose, same training budget
+(``appearance-nav bench --only agents``; its options are ``--agents-<option>``).
 
-CleanRL style: one file, every setting a field of ``Args`` (``--help`` lists them).
+    appearance-nav bench --only agents       # needs results/localizer.npz (make demo)
+    appearance-nav bench --only agents --agents-total-timesteps 50000 --agents-episodes 20
 
-    python scripts/bench_agents.py                       # needs results/localizer.npz (make demo)
-    python scripts/bench_agents.py --total-timesteps 50000 --episodes 20   # a shorter run
-
-1. ``scripts/train_agent.py`` trains PPO on the oracle (true pose) and on the belief with the
-   same number of environment steps (and seeds), each in this process, one after the other;
-2. ``scripts/eval_agents.py`` evaluates the scripted agent on all three pose sources (oracle,
-   belief, dead reckoning) and each PPO policy on the source it was trained on, over the same
-   ``episodes`` held-out resets.
+1. :func:`~localization.workflows.training.train_agent` trains PPO on the oracle (true pose)
+   and on the belief with the same number of environment steps (and seeds), each in this
+   process, one after the other;
+2. :func:`~localization.workflows.navigation.evaluate_agents` evaluates the scripted agent on
+   all three pose sources (oracle, belief, dead reckoning) and each PPO policy on the source it
+   was trained on, over the same ``episodes`` held-out resets.
 
 Writes ``<out>/bench_agents.json`` and ``<out>/bench_agents.md``. Targets (PASS/MISS): PPO on the
 belief reaches >= 0.9x the success rate of PPO on the true pose; each training run <= 30 min.
@@ -20,29 +20,26 @@ from __future__ import annotations
 import dataclasses
 import json
 import platform
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-for p in (ROOT, ROOT / "scripts"):
-    if str(p) not in sys.path:
-        sys.path.insert(0, str(p))
-
 import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
 
 # isort: split
-import eval_agents
-import train_agent
+from localization.workflows.navigation import EvalConfig, evaluate_agents
+from localization.workflows.training import TrainConfig, train_agent
+
+__all__ = ["TARGET_RATIO", "TARGET_TRAIN_MINUTES", "AgentsBenchConfig", "run_agents_bench"]
 
 TARGET_RATIO = 0.9
 TARGET_TRAIN_MINUTES = 30.0
-from cli import parse_dataclass_args
 
 
 @dataclass
-class Args:
+class AgentsBenchConfig:
+    """Settings of the agents benchmark."""
+
     localizer: str = field(default="results/localizer.npz", metadata={
         "help": "fitted AppearanceLocalizer of the city (make demo writes it)"})
     total_timesteps: int = field(default=400_000, metadata={"help": "PPO steps per pose source"})
@@ -52,32 +49,28 @@ class Args:
     vec_env: str = field(default="subproc", metadata={
         "help": "'subproc' (forked env workers) or 'dummy' (one process), for both sources"})
     seed: int = field(default=0, metadata={"help": "training seed (the same for both sources)"})
-    episodes: int = field(default=100, metadata={"help": "evaluation episodes per agent and source"})
+    episodes: int = field(default=100, metadata={
+        "help": "evaluation episodes per agent and source"})
     scene_seed: int = field(default=0, metadata={"help": "the city"})
     motion_noise: float = field(default=0.1, metadata={"help": "actuation noise of the env"})
     out: str = field(default="results", metadata={"help": "where bench_agents.* and agents/ go"})
 
 
-def parse_args(argv: list[str] | None = None) -> Args:
-    """Parse ``--field-name value`` options built from the fields of ``Args``."""
-    return parse_dataclass_args(Args, __doc__, argv)
-
-
-def main(argv: list[str] | None = None) -> dict:
-    args = parse_args(argv)
+def run_agents_bench(args: AgentsBenchConfig) -> dict:
+    """Train on both sources, evaluate, write ``bench_agents.json`` / ``.md``; return the
+    result."""
     out = Path(args.out)
-    common = ["--localizer", args.localizer, "--scene-seed", str(args.scene_seed),
-              "--motion-noise", str(args.motion_noise)]
+    common = {"localizer": args.localizer, "scene_seed": args.scene_seed,
+              "motion_noise": args.motion_noise}
     training = {}
     for source in ("oracle", "belief"):
-        training[source] = train_agent.main([
-            "--pose-source", source, "--total-timesteps", str(args.total_timesteps),
-            "--n-envs", str(args.n_envs), "--vec-env", args.vec_env, "--seed", str(args.seed),
-            "--eval-freq", str(args.eval_freq),
-            "--out", str(out / "agents"), *common])
+        training[source] = train_agent(TrainConfig(
+            pose_source=source, total_timesteps=args.total_timesteps, n_envs=args.n_envs,
+            vec_env=args.vec_env, seed=args.seed, eval_freq=args.eval_freq,
+            out=str(out / "agents"), **common))
     t0 = time.perf_counter()
-    rows = eval_agents.main(["--episodes", str(args.episodes), "--policies", str(out / "agents"),
-                             "--out", str(out), *common])
+    rows = evaluate_agents(EvalConfig(episodes=args.episodes, policies=str(out / "agents"),
+                                      out=str(out), **common))
     success = {(r["agent"], r["source"]): r["success_rate"] for r in rows}
     ratio = success[("ppo", "belief")] / max(success[("ppo", "oracle")], 1e-9)
     minutes = {s: training[s]["train_seconds"] / 60 for s in training}
@@ -101,7 +94,3 @@ def main(argv: list[str] | None = None) -> dict:
     (out / "bench_agents.json").write_text(json.dumps(result, indent=2))
     print(md)
     return result
-
-
-if __name__ == "__main__":
-    main()

@@ -1,9 +1,5 @@
-"""Train a PPO navigator (stable-baselines3 ``MultiInputPolicy``) on a pose source.
-
-CleanRL style: one file, every setting a field of ``Args`` (``--help`` lists them).
-
-    python scripts/train_agent.py --pose-source belief --localizer results/localizer.npz
-    python scripts/train_agent.py --pose-source oracle --total-timesteps 300000
+"""Train a PPO navigator (stable-baselines3 ``MultiInputPolicy``) on a pose source
+(``appearance-nav train``).
 
 The policy sees :class:`agents.observations.NavigationObservation` (the street plan and goal
 in the belief's body frame, plus the belief's standard deviations), never the true pose; it is
@@ -18,21 +14,15 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
 
 import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
 
 # isort: split
 import numpy as np
 import torch
-from cli import parse_dataclass_args
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
@@ -45,9 +35,16 @@ from agents.rewards import StreetProgressReward
 from agents.sources import POSE_SOURCES, make_pose_env
 from localization.localizer import AppearanceLocalizer
 
+__all__ = ["VEC_ENVS", "PolicyCheckpoint", "ProgressBar", "TrainConfig", "make_vec_env",
+           "train_agent"]
+
+VEC_ENVS = ("subproc", "dummy")
+
 
 @dataclass
-class Args:
+class TrainConfig:
+    """Settings of a training run (the options of ``appearance-nav train``)."""
+
     pose_source: str = field(default="belief", metadata={
         "help": "what the policy navigates on: " + ", ".join(POSE_SOURCES)})
     localizer: str = field(default="results/localizer.npz", metadata={
@@ -70,17 +67,13 @@ class Args:
     n_steps: int = field(default=256, metadata={"help": "rollout steps per environment"})
     batch_size: int = field(default=512, metadata={"help": "PPO minibatch size"})
     seed: int = field(default=0, metadata={"help": "seed of PPO and of the training resets"})
-    eval_freq: int = field(default=25_000, metadata={"help": "environment steps between evaluations"})
+    eval_freq: int = field(default=25_000, metadata={
+        "help": "environment steps between evaluations"})
     eval_episodes: int = field(default=20, metadata={"help": "episodes per evaluation"})
     checkpoint_freq: int = field(default=100_000, metadata={"help": "steps between checkpoints"})
     threads: int = field(default=1, metadata={"help": "torch threads"})
     out: str = field(default="results/agents", metadata={"help": "output folder"})
     progress: bool = field(default=True, metadata={"help": "show a progress bar"})
-
-
-def parse_args(argv: list[str] | None = None) -> Args:
-    """Parse ``--field-name value`` options built from the fields of ``Args``."""
-    return parse_dataclass_args(Args, __doc__, argv)
 
 
 class ProgressBar(BaseCallback):
@@ -114,10 +107,7 @@ class PolicyCheckpoint(BaseCallback):
         return True
 
 
-VEC_ENVS = ("subproc", "dummy")
-
-
-def make_vec_env(args: Args, localizer: AppearanceLocalizer | None, n: int, seed: int,
+def make_vec_env(args: TrainConfig, localizer: AppearanceLocalizer | None, n: int, seed: int,
                  kind: str = "dummy") -> VecEnv:
     """``n`` navigation envs on the pose source, seeded from ``seed``, in this process
     (``kind="dummy"``) or each in a forked worker (``"subproc"``: the workers inherit the
@@ -137,8 +127,9 @@ def make_vec_env(args: Args, localizer: AppearanceLocalizer | None, n: int, seed
     return venv
 
 
-def main(argv: list[str] | None = None) -> dict:
-    args = parse_args(argv)
+def train_agent(args: TrainConfig) -> dict:
+    """Train PPO as ``args`` says; write the policy, logs and ``train.json`` under
+    ``<out>/<pose_source>/``; return the summary of ``train.json``."""
     torch.set_num_threads(args.threads)
     out = Path(args.out) / args.pose_source
     out.mkdir(parents=True, exist_ok=True)
@@ -171,7 +162,3 @@ def main(argv: list[str] | None = None) -> dict:
     venv.close()
     eval_env.close()
     return summary
-
-
-if __name__ == "__main__":
-    main()

@@ -1,0 +1,122 @@
+"""Benchmarks: speed and accuracy targets measured side by side, each writing JSON and a
+markdown table (``make bench`` runs them all).
+
+    appearance-nav bench                                   # env, gse, filter, agents
+    appearance-nav bench --only gse,filter --gse-quick --filter-quick
+    appearance-nav bench --only env --no-env-cameras --env-sizes 64
+
+- env: AppearanceNav-v0 steps/s against a raw MuJoCo step+render loop
+  (``<env-out-dir>/bench_env.json`` / ``.md``);
+- gse: GSERegressor fit time, memory and query latency vs n, accuracy against KNR and
+  retrieval (``<gse-out>.json`` / ``.md``);
+- filter: BeliefWrapper's per-step cost and closed-loop tracking accuracy
+  (``<filter-out-dir>/bench_filter.json`` / ``.md``);
+- agents: PPO on the belief against PPO on the true pose, same budget (needs the localizer
+  ``make demo`` writes; ``<agents-out>/bench_agents.json`` / ``.md``).
+
+Each benchmark's own options are ``--<benchmark>-<option>`` (listed below); they are checked
+for every benchmark chosen by ``--only`` before the first one starts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
+
+# isort: split
+from localization.cli._args import (
+    UsageError,
+    check_choice,
+    check_choices,
+    check_env,
+    check_existing_file,
+    check_int_list,
+    check_numbers,
+    check_output_dir,
+    check_output_file,
+)
+from localization.workflows.benchmarks import BENCHMARKS, benchmark
+from localization.workflows.benchmarks.agents import AgentsBenchConfig
+from localization.workflows.benchmarks.env import EnvBenchConfig
+from localization.workflows.benchmarks.filter import FilterBenchConfig
+from localization.workflows.benchmarks.gse import GSEBenchConfig
+from localization.workflows.training import VEC_ENVS
+
+__all__ = ["Args", "check", "run"]
+
+
+@dataclass
+class Args:
+    """Which benchmarks run, and the options of each."""
+
+    only: str = field(default=",".join(BENCHMARKS), metadata={
+        "help": "comma-separated benchmarks to run: " + ", ".join(BENCHMARKS)})
+    env: EnvBenchConfig = field(default_factory=lambda: EnvBenchConfig(cameras=True),
+                                metadata={"help": "env steps/s vs raw MuJoCo"})
+    gse: GSEBenchConfig = field(default_factory=GSEBenchConfig, metadata={
+        "help": "GSE fit time, memory, latency and accuracy"})
+    filter: FilterBenchConfig = field(default_factory=FilterBenchConfig, metadata={
+        "help": "belief wrapper cost and tracking accuracy"})
+    agents: AgentsBenchConfig = field(default_factory=AgentsBenchConfig, metadata={
+        "help": "PPO on the belief vs on the true pose"})
+
+
+def _check_env_bench(c: EnvBenchConfig) -> None:
+    check_int_list("env_sizes", c.sizes, minimum=1)
+    check_numbers(c, positive=("steps", "chunk"), non_negative=("warmup", "scene_seed", "seed"),
+                  prefix="env_")
+    check_output_dir("env_out_dir", c.out_dir)
+
+
+def _check_gse_bench(c: GSEBenchConfig) -> None:
+    check_int_list("gse_ns", c.ns, minimum=2)
+    check_int_list("gse_accuracy_dims", c.accuracy_dims, minimum=1)
+    check_numbers(c, positive=("m", "n_neighbors", "batch_size", "latency_repeats", "latency_n",
+                               "accuracy_n_train", "accuracy_n_test", "timeout"),
+                  non_negative=("seed", "map_seed", "threads"), prefix="gse_")
+    if c.out:
+        check_output_file("gse_out", str(Path(c.out).with_suffix(".json")))
+
+
+def _check_filter_bench(c: FilterBenchConfig) -> None:
+    check_env(c, prefix="filter_")
+    check_numbers(c, positive=("n_train", "n_train_dcnn", "n_drive", "steps", "runs",
+                               "overhead_steps", "chunk"), non_negative=("seed",),
+                  prefix="filter_")
+    check_output_dir("filter_out_dir", c.out_dir)
+
+
+def _check_agents_bench(c: AgentsBenchConfig) -> None:
+    try:
+        check_existing_file("agents_localizer", c.localizer)
+    except UsageError as err:
+        raise UsageError("agents_localizer", f"{str(err).split(': ', 1)[1]} (appearance-nav "
+                         "demo writes it)") from None
+    check_env(c, prefix="agents_")
+    check_choice("agents_vec_env", c.vec_env, VEC_ENVS)
+    check_numbers(c, positive=("total_timesteps", "eval_freq", "n_envs", "episodes"),
+                  non_negative=("seed",), prefix="agents_")
+    check_output_dir("agents_out", c.out)
+
+
+CHECKS = {"env": _check_env_bench, "gse": _check_gse_bench, "filter": _check_filter_bench,
+          "agents": _check_agents_bench}
+
+
+def check(args: Args) -> None:
+    """``--only`` names benchmarks, and their options are valid."""
+    for name in check_choices("only", args.only, BENCHMARKS):
+        CHECKS[name](getattr(args, name))
+
+
+def run(args: Args) -> None:
+    """Run the chosen benchmarks one after the other, in the order of ``make bench``."""
+    chosen = set(args.only.split(","))
+    for name in BENCHMARKS:
+        if name in chosen:
+            print(f"[bench] {name}", flush=True)
+            _, run_one = benchmark(name)
+            run_one(dataclasses.replace(getattr(args, name)))

@@ -1,0 +1,35 @@
+"""Render a dataset of camera images and true poses from AppearanceNav-v0 into an ``.npz``.
+
+    appearance-nav collect --mode grid --n 2000 --out data/grid_seed0.npz
+    appearance-nav collect --mode route --n 3000 --motion-noise 0.05 --camera fisheye
+
+The file holds ``images`` (n, H, W, 3) uint8, ``poses`` (n, 3) float64 ``[x, y, yaw]`` and
+``meta`` (a JSON string with these options); read it with ``envs.load_dataset``.
+"""
+
+from __future__ import annotations
+
+# isort: split
+from envs.datasets import MODES
+from localization.cli._args import check_choice, check_env, check_numbers, check_output_file
+from localization.workflows.collect import CollectConfig, collect_out_path, collect_to_file
+
+__all__ = ["Args", "check", "run"]
+
+Args = CollectConfig
+
+
+def check(args: Args) -> None:
+    """Every option is valid, and ``--out`` can be written (before anything is collected)."""
+    check_choice("mode", args.mode, MODES)
+    check_env(args)
+    check_numbers(args, positive=("n", "height", "width", "n_headings"),
+                  non_negative=("seed",))
+    if args.out:
+        check_output_file("out", args.out)
+    check_output_file("out", str(collect_out_path(args)))
+
+
+def run(args: Args) -> None:
+    """Collect and save (:func:`localization.workflows.collect.collect_to_file`)."""
+    collect_to_file(args)

@@ -1,0 +1,36 @@
+"""The main job (``make demo``): the whole pipeline on the default city.
+
+    appearance-nav demo                 # default city (scene seed 0), results/ as output
+    appearance-nav demo --scene-seed 3 --lanes route
+
+Stages: (1) drive the route once: ``<out>/route_dataset.npz`` and ``<out>/demo_route.png``;
+(2) fit the localizer (features + GSE + noise model) on images around the driving lanes:
+``<out>/localizer.npz``; (3) closed-loop tracking of each measurement model against dead
+reckoning: ``<out>/track_<model>.png``, ``<out>/demo.md``; (4) the scripted agent on every
+pose source: ``<out>/demo_agents/agents.md``. Everything also in ``<out>/demo.json``.
+"""
+
+from __future__ import annotations
+
+# isort: split
+from envs.lanes import LANE_SETS
+from localization.cli._args import check_choice, check_env, check_numbers, check_output_dir
+from localization.workflows.demo import DemoConfig, run_demo
+
+__all__ = ["Args", "check", "run"]
+
+Args = DemoConfig
+
+
+def check(args: Args) -> None:
+    """Every option is valid (raises :class:`~localization.cli._args.UsageError`)."""
+    check_env(args)
+    check_numbers(args, positive=("n_route", "strip", "n_train", "n_drive", "steps"),
+                  non_negative=("seed", "start", "episodes"))
+    check_choice("lanes", args.lanes, LANE_SETS)
+    check_output_dir("out", args.out)
+
+
+def run(args: Args) -> None:
+    """Run the demo (:func:`localization.workflows.demo.run_demo`)."""
+    run_demo(args)

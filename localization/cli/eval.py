@@ -1,0 +1,52 @@
+"""Evaluate the navigators on each pose source: success, path ratio, collisions, time to goal.
+
+    appearance-nav eval --episodes 100
+    appearance-nav eval --agents scripted --sources oracle,dead_reckoning
+
+For every agent (the scripted street navigator; PPO policies trained by
+``appearance-nav train``, each evaluated on the pose source it was trained on; a missing
+policy is skipped with a note) and pose source (oracle = true pose, belief = the GSE/EKF
+belief from images, dead_reckoning = the motion model alone), the same ``episodes`` resets
+(seeds ``seed .. seed + episodes - 1``) are run. Writes ``<out>/agents.md`` (table) and
+``<out>/agents.json`` (summary and every episode).
+"""
+
+from __future__ import annotations
+
+import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
+
+# isort: split
+from agents.sources import POSE_SOURCES, STARTS
+from localization.cli._args import (
+    check_choice,
+    check_choices,
+    check_env,
+    check_existing_file,
+    check_numbers,
+    check_output_dir,
+)
+from localization.localizer import MEASUREMENTS
+from localization.workflows.navigation import AGENTS, EvalConfig, evaluate_agents
+
+__all__ = ["Args", "check", "run"]
+
+Args = EvalConfig
+
+
+def check(args: Args) -> None:
+    """Every option is valid (raises :class:`~localization.cli._args.UsageError`)."""
+    check_choices("agents", args.agents, AGENTS)
+    sources = check_choices("sources", args.sources, POSE_SOURCES)
+    if set(sources) - {"oracle"}:
+        check_existing_file("localizer", args.localizer)
+    if args.measurement:
+        check_choice("measurement", args.measurement, MEASUREMENTS)
+    check_env(args)
+    check_choice("start", args.start, STARTS)
+    check_numbers(args, positive=("max_episode_steps", "episodes"), non_negative=("seed",))
+    check_output_dir("out", args.out)
+
+
+def run(args: Args) -> None:
+    """Evaluate (:func:`localization.workflows.navigation.evaluate_agents`)."""
+    evaluate_agents(args)

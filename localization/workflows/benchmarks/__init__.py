@@ -1,0 +1,36 @@
+"""Benchmarks (``appearance-nav bench``): speed and accuracy targets measured side by side
+in one run, each writing JSON and a markdown table.
+
+- :mod:`.env`: env steps/s against a raw MuJoCo step+render loop;
+- :mod:`.gse`: GSE fit time, memory, query latency and accuracy against KNR and retrieval;
+- :mod:`.filter`: the belief wrapper's per-step cost and closed-loop tracking accuracy;
+- :mod:`.agents`: PPO on the belief against PPO on the true pose.
+
+:data:`BENCHMARKS` maps each name to its module, settings class and run function; modules
+load on first use.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from typing import Any
+
+__all__ = ["BENCHMARKS", "benchmark"]
+
+#: name -> (module, settings dataclass, run function), in the order ``make bench`` runs them
+BENCHMARKS: dict[str, tuple[str, str, str]] = {
+    "env": ("env", "EnvBenchConfig", "run_env_bench"),
+    "gse": ("gse", "GSEBenchConfig", "run_gse_bench"),
+    "filter": ("filter", "FilterBenchConfig", "run_filter_bench"),
+    "agents": ("agents", "AgentsBenchConfig", "run_agents_bench"),
+}
+
+
+def benchmark(name: str) -> tuple[type, Callable[[Any], Any]]:
+    """The settings dataclass and the run function of benchmark ``name``."""
+    if name not in BENCHMARKS:
+        raise ValueError(f"unknown benchmark {name!r}; choose from {list(BENCHMARKS)}")
+    module, config, run = BENCHMARKS[name]
+    mod = importlib.import_module(f"{__name__}.{module}")
+    return getattr(mod, config), getattr(mod, run)
