@@ -1,6 +1,6 @@
 """PPO (stable-baselines3) on the navigation observation, saved and loaded without pickle.
 
-:func:`make_ppo` builds the model ``scripts/train_agent.py`` trains (``MultiInputPolicy`` on
+:func:`make_ppo` builds the model ``appearance-nav train`` trains (``MultiInputPolicy`` on
 :class:`agents.observations.NavigationObservation`). stable-baselines3's own ``.zip`` format
 unpickles parts of the model on load, so policies are saved here as a torch state dict
 (``<path>.pt``, loaded with ``torch.load(weights_only=True)``) plus JSON settings
