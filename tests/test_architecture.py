@@ -14,7 +14,7 @@ PACKAGES = ("envs", "localization", "agents")
 
 #: lowest layer first; a module may import only from its own layer or lower ones
 LAYERS: list[tuple[str, ...]] = [
-    ("localization", "localization.geometry"),
+    ("localization", "localization.geometry", "localization._validation"),
     ("envs",),
     ("localization.features",),
     ("localization.gse", "localization.metrics", "localization.model_selection",
