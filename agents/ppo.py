@@ -107,7 +107,7 @@ def _read_settings(settings_file: Path) -> dict[str, Any]:
         raise ValueError(f"{settings_file} is not a policy settings file (not valid JSON: {err})"
                          ) from None
     if not isinstance(settings, dict):
-        raise ValueError(f"{settings_file} is not a policy settings file (a JSON "
+        raise ValueError(f"{settings_file} is not a policy settings file (a JSON "  # noqa: TRY004  (a bad file is a bad value)
                          f"{type(settings).__name__}, not an object)")
     if settings.get("format") != FORMAT:
         raise ValueError(f"{settings_file}: unknown policy format {settings.get('format')!r}")
@@ -116,7 +116,7 @@ def _read_settings(settings_file: Path) -> dict[str, Any]:
         raise ValueError(f"{settings_file} is not a complete policy settings file: "
                          f"missing key(s) {missing}")
     if not isinstance(settings["policy_kwargs"], dict):
-        raise ValueError(f"{settings_file}: policy_kwargs must be a JSON object")
+        raise ValueError(f"{settings_file}: policy_kwargs must be a JSON object")  # noqa: TRY004  (a bad file is a bad value)
     try:
         lookaheads = check_array(settings["lookaheads"], "lookaheads", ndim=1)
     except (TypeError, ValueError) as err:
@@ -139,7 +139,7 @@ def _read_weights(weights: Path) -> dict[str, Any]:
                          f"weights ({type(err).__name__}); is it truncated or another file?"
                          ) from None
     if not isinstance(state, dict):
-        raise ValueError(f"{weights} is not a policy file: it holds a {type(state).__name__}, "
+        raise ValueError(f"{weights} is not a policy file: it holds a {type(state).__name__}, "  # noqa: TRY004  (a bad file is a bad value)
                          f"not a state dict")
     return state
 

@@ -22,10 +22,10 @@ import gymnasium as gym
 import numpy as np
 
 import envs  # noqa: F401  (registers AppearanceNav-v0)
+from envs.appearance_nav import RESET_OPTIONS
 from envs.cameras import check_image_size
 from envs.datasets import check_city_env
 from envs.lanes import lane_poses
-from envs.appearance_nav import RESET_OPTIONS
 from localization._validation import check_choice, check_options, check_real, check_seed
 from localization.wrappers import BeliefWrapper, DeadReckoningWrapper, OracleWrapper
 
