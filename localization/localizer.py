@@ -302,8 +302,8 @@ class AppearanceLocalizer(NoiseModelMixin):
         calibrated ``consistency(measurement)``), the features' R by its mean. ``h`` and
         ``H`` are NaN outside the training domain.
         """
-        self._check_fitted(noise=True)
         check_choice(measurement, "measurement", MEASUREMENTS)
+        self._check_fitted(noise=True)
         alpha = self.consistency(measurement) if alpha is None else _check_alpha(alpha)
         reg, to_model = self.regressor_, self._to_model
         if measurement == "features":

@@ -9,7 +9,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import envs  # noqa: F401  (registers AppearanceNav-v0)
+import envs
 from envs.datasets import collect_dataset, drive_route, drive_streets, grid_poses
 from envs.lanes import lane_poses, street_tour
 from envs.motion_model import UnicycleModel
@@ -197,7 +197,7 @@ for method in ("predict", "jacobian_pose", "jacobian_control"):
             ([0, 0, 0], [1], V, r"\bu\b"), ([0, 0, 0], [np.inf, 0], V, r"\bu\b"),
             ([0, 0, 0], [1j, 0], T, r"\bu\b")]):
         CASES.append(Case(f"motion-{method}-{i}",
-                          lambda ctx, f=getattr(F, method), p=pose, c=u: f(p, c), exc, m))
+                          lambda ctx, name=method, p=pose, c=u: getattr(F, name)(p, c), exc, m))
 
 
 @pytest.mark.parametrize("case", params(CASES))
@@ -208,7 +208,7 @@ def test_bad_input_raises_a_clear_error(case, ctx):
 # ---------------------------------------------------------------- valid boundary cases
 @pytest.mark.parametrize("seed", [0, np.int64(0), np.int32(3), np.uint8(7), 2 ** 40])
 def test_valid_seeds_keep_working(ctx, seed):
-    obs, info = ctx.env.reset(seed=seed)
+    obs, _ = ctx.env.reset(seed=seed)
     assert obs["image"].shape == (*SIZE, 3)
     assert generate_city(seed).seed == int(seed)
 
