@@ -244,3 +244,16 @@ def test_valid_boundaries_of_constructor():
                                 render_mode=None)
     env.close()
     assert UnicycleModel(np.float32(0.1)).dt == pytest.approx(0.1)
+
+
+# ---------------------------------------------------------------- metrics (numpy only)
+@pytest.mark.parametrize("bad, exc", [(np.ones(3) + 1j, TypeError), (["a", "b", "c"], TypeError),
+                                      (np.array([True, False, True]), TypeError),
+                                      ([[1.0], [1.0, 2.0], [3.0]], ValueError),
+                                      (np.ones(4), ValueError), ([np.nan] * 3, ValueError)])
+@pytest.mark.parametrize("metric", ["rmse", "rrmse"])
+def test_metrics_name_a_bad_estimate(metric, bad, exc):
+    from localization import metrics
+
+    with pytest.raises(exc, match="theta_hat"):
+        getattr(metrics, metric)(bad, np.array([0.1, 0.5, 0.9]))
