@@ -23,7 +23,8 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
-from agents.scripted import Navigator, check_belief_observation
+from agents.scripted import OBS_NAMES, Navigator, check_belief_observation
+from localization._validation import check_array
 
 __all__ = ["NavigationFeatures", "NavigationObservation"]
 
@@ -54,9 +55,10 @@ class NavigationFeatures:
 
     def __init__(self, city: Any, lookaheads: tuple[float, ...] = (0.5, 1.0, 2.0),
                  replan_distance: float = 1.0) -> None:
-        if not lookaheads or min(lookaheads) <= 0:
+        d = check_array(lookaheads, "lookaheads", ndim=1, what="(distances in m)")
+        if len(d) == 0 or np.any(d <= 0):
             raise ValueError(f"lookaheads must be positive distances, got {lookaheads}")
-        self.lookaheads = tuple(float(d) for d in lookaheads)
+        self.lookaheads = tuple(float(v) for v in d)
         self.navigator = Navigator(city, replan_distance)
         self.observation_space = self.space(self.lookaheads)
 
@@ -76,7 +78,7 @@ class NavigationFeatures:
     def __call__(self, obs: Mapping[str, Any]) -> dict[str, NDArray[np.float32]]:
         """The policy observation for one belief observation."""
         mean, cov, goal = check_belief_observation(obs)
-        path = self.navigator.update(mean, goal)
+        path = self.navigator.update(mean, goal, OBS_NAMES)
         ahead = np.array([path.ahead(d) for d in self.lookaheads])
         std = np.sqrt(np.clip(cov[_DIAG], 0.0, None))
         return {

@@ -26,10 +26,46 @@ from numpy.typing import ArrayLike
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import shortest_path
 
+from localization._validation import check_array, check_real
 from localization.geometry import Array
 
-__all__ = ["PlannedPath", "StreetPlanner", "path_length", "project_to_segments",
-           "round_corners"]
+__all__ = ["PlannedPath", "StreetPlanner", "check_city_point", "path_length",
+           "project_to_segments", "round_corners"]
+
+#: how far (as a fraction of the city's side) a point may lie outside the city before it is
+#: refused as a mistake (a belief may stray a little past the boundary wall; hundreds of
+#: metres is a wrong unit or a wrong city)
+OUTSIDE_FRACTION = 0.5
+
+
+def check_city_point(p: ArrayLike, name: str, city: Any, sizes: tuple[int, ...] = (2, 3)) -> Array:
+    """``p`` as a finite float64 point [x, y] (or pose [x, y, yaw]) near ``city``.
+
+    Parameters
+    ----------
+    p : array-like of shape (k,), k in ``sizes``.
+    name : the argument's name, for messages.
+    city : envs.scene.City — its ``bounds`` and ``size``.
+    sizes : the allowed lengths (2: a position, 3: a pose).
+
+    Raises
+    ------
+    TypeError
+        If ``p`` does not hold real numbers.
+    ValueError
+        If it has another shape, holds NaN/inf, or lies more than ``OUTSIDE_FRACTION`` of the
+        city's side outside the city.
+    """
+    a = check_array(p, name, ndim=1)
+    if a.shape[0] not in sizes:
+        what = " or ".join({2: "(2,) [x, y]", 3: "(3,) [x, y, yaw]"}[k] for k in sizes)
+        raise ValueError(f"{name} must have shape {what}, got shape {a.shape}")
+    lo, hi = city.bounds
+    slack = OUTSIDE_FRACTION * city.size
+    if not (lo - slack <= a[0] <= hi + slack and lo - slack <= a[1] <= hi + slack):
+        raise ValueError(f"{name} {a[:2]} is far outside the city [{lo}, {hi}]^2 "
+                         f"(more than {slack:g} m): wrong units or another city?")
+    return a
 
 
 
@@ -105,10 +141,13 @@ class StreetPlanner:
     """
 
     def __init__(self, city: Any, turn_radius: float = 0.8, u_turn_cost: float = 4.0) -> None:
+        if not (hasattr(city, "street_graph") and hasattr(city, "bounds")):
+            raise TypeError(f"city must be an envs.scene.City (env.unwrapped.city), "
+                            f"got {type(city).__name__}")
+        self.turn_radius = check_real(turn_radius, "turn_radius", low=0.0, low_open=True)
+        self.u_turn_cost = check_real(u_turn_cost, "u_turn_cost", low=0.0)
         nodes, edges = city.street_graph()
         self.city = city
-        self.turn_radius = float(turn_radius)
-        self.u_turn_cost = float(u_turn_cost)
         self.nodes = np.asarray(nodes, dtype=np.float64)
         self.edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
         if len(self.edges) == 0:
@@ -181,9 +220,7 @@ class StreetPlanner:
         ``turn_radius`` (sampled every 5 cm). It sets off in the direction of its heading, or
         turns round on the spot first when that saves more than ``u_turn_cost`` metres.
         """
-        pose = np.asarray(pose, dtype=np.float64).reshape(-1)
-        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
-            raise ValueError(f"pose must be a finite [x, y, yaw], got {pose}")
+        pose = check_city_point(pose, "pose", self.city, sizes=(3,))
         goal = self._check_point(goal, "goal")
         es, _, fs = self.nearest_street_point(pose[:2])
         eg, _, fg = self.nearest_street_point(goal)
@@ -223,12 +260,8 @@ class StreetPlanner:
             node = pred[node]
         return [self.nodes[self._head[d]]] + [self.nodes[n] for n in reversed(chain)]
 
-    @staticmethod
-    def _check_point(p: ArrayLike, name: str) -> Array:
-        p = np.asarray(p, dtype=np.float64).reshape(-1)[:2]
-        if p.shape != (2,) or not np.all(np.isfinite(p)):
-            raise ValueError(f"{name} must be a finite [x, y] (or pose [x, y, yaw]), got {p}")
-        return p
+    def _check_point(self, p: ArrayLike, name: str) -> Array:
+        return check_city_point(p, name, self.city)[:2]
 
 
 def _dedupe(path: Array, tol: float = 1e-6) -> Array:
@@ -248,9 +281,11 @@ class PlannedPath:
     """
 
     def __init__(self, waypoints: ArrayLike, step: float = 0.05, search: float = 3.0) -> None:
-        w = np.asarray(waypoints, dtype=np.float64)
-        if w.ndim != 2 or w.shape[1] != 2 or len(w) < 1 or not np.all(np.isfinite(w)):
-            raise ValueError(f"waypoints must be finite with shape (p, 2), p >= 1, got {w.shape}")
+        w = check_array(waypoints, "waypoints", shape=(None, 2))
+        if len(w) < 1:
+            raise ValueError(f"waypoints must hold at least one point, got shape {w.shape}")
+        step = check_real(step, "step", low=0.0, low_open=True)
+        search = check_real(search, "search", low=0.0, low_open=True)
         pts = [w[0]]
         for a, b in pairwise(w):
             n = max(int(np.ceil(np.hypot(*(b - a)) / step)), 1)

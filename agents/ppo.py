@@ -25,6 +25,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 
 from agents.observations import NavigationFeatures
+from localization._validation import check_array, check_seed
 
 __all__ = ["PPO_DEFAULTS", "PPOAgent", "load_policy", "make_ppo", "save_policy"]
 
@@ -45,6 +46,7 @@ ACTION_SPACE = spaces.Box(-1.0, 1.0, (2,), np.float32)
 
 def make_ppo(env: gym.Env | Any, seed: int = 0, **overrides: Any) -> PPO:
     """A ``PPO("MultiInputPolicy", env)`` with :data:`PPO_DEFAULTS` (overridable), on the CPU."""
+    check_seed(seed, "seed")
     kwargs = {**PPO_DEFAULTS, **overrides}
     return PPO("MultiInputPolicy", env, seed=seed, device="cpu", verbose=0, **kwargs)
 
@@ -52,7 +54,7 @@ def make_ppo(env: gym.Env | Any, seed: int = 0, **overrides: Any) -> PPO:
 def save_policy(model: PPO, path: str | Path, lookaheads: tuple[float, ...] = (0.5, 1.0, 2.0),
                 **meta: Any) -> Path:
     """Write ``<path>.pt`` (policy state dict) and ``<path>.json`` (settings); return the .pt path."""
-    path = Path(path).with_suffix("")
+    path = _check_path(path).with_suffix("")
     path.parent.mkdir(parents=True, exist_ok=True)
     torch.save(model.policy.state_dict(), path.with_suffix(".pt"))
     settings = {"format": FORMAT, "policy_kwargs": model.policy_kwargs,
@@ -71,26 +73,75 @@ def load_policy(path: str | Path) -> tuple[MultiInputActorCriticPolicy, dict[str
     ValueError
         If the files are not a saved policy or do not match the navigation observation.
     """
-    path = Path(path).with_suffix("")
+    path = _check_path(path).with_suffix("")
     weights, settings_file = path.with_suffix(".pt"), path.with_suffix(".json")
     for f in (weights, settings_file):
-        if not f.exists():
+        if not f.is_file():
             raise FileNotFoundError(f"no saved PPO policy file {f}")
+    settings = _read_settings(settings_file)
+    space = NavigationFeatures.space(tuple(settings["lookaheads"]))
+    try:
+        policy = MultiInputActorCriticPolicy(space, ACTION_SPACE, lambda _: 0.0,
+                                             **settings["policy_kwargs"])
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{settings_file}: policy_kwargs do not build a policy: {err}") from None
+    state = _read_weights(weights)
+    try:
+        policy.load_state_dict(state, strict=True)
+    except (RuntimeError, KeyError, ValueError, TypeError) as err:
+        raise ValueError(f"{weights} does not hold this policy's weights: {err}") from None
+    return policy.eval(), settings
+
+
+def _check_path(path: object) -> Path:
+    if not isinstance(path, (str, Path)):
+        raise TypeError(f"path must be a str or pathlib.Path, got {type(path).__name__}")
+    return Path(path)
+
+
+def _read_settings(settings_file: Path) -> dict[str, Any]:
+    """The JSON settings of a saved policy, checked for the keys :func:`load_policy` uses."""
     try:
         settings = json.loads(settings_file.read_text())
-    except json.JSONDecodeError as err:
-        raise ValueError(f"{settings_file} is not valid JSON: {err}") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise ValueError(f"{settings_file} is not a policy settings file (not valid JSON: {err})"
+                         ) from None
+    if not isinstance(settings, dict):
+        raise ValueError(f"{settings_file} is not a policy settings file (a JSON "  # noqa: TRY004  (a bad file is a bad value)
+                         f"{type(settings).__name__}, not an object)")
     if settings.get("format") != FORMAT:
         raise ValueError(f"{settings_file}: unknown policy format {settings.get('format')!r}")
-    space = NavigationFeatures.space(tuple(settings["lookaheads"]))
-    policy = MultiInputActorCriticPolicy(space, ACTION_SPACE, lambda _: 0.0,
-                                         **settings["policy_kwargs"])
+    missing = [k for k in ("policy_kwargs", "lookaheads") if k not in settings]
+    if missing:
+        raise ValueError(f"{settings_file} is not a complete policy settings file: "
+                         f"missing key(s) {missing}")
+    if not isinstance(settings["policy_kwargs"], dict):
+        raise ValueError(f"{settings_file}: policy_kwargs must be a JSON object")  # noqa: TRY004  (a bad file is a bad value)
+    try:
+        lookaheads = check_array(settings["lookaheads"], "lookaheads", ndim=1)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{settings_file}: bad lookaheads: {err}") from None
+    if len(lookaheads) == 0 or np.any(lookaheads <= 0):
+        raise ValueError(f"{settings_file}: lookaheads must be positive distances, "
+                         f"got {settings['lookaheads']}")
+    return settings
+
+
+def _read_weights(weights: Path) -> dict[str, Any]:
+    """``torch.load(weights_only=True)`` of a policy state dict; any failure (truncated, empty,
+    not a torch file, or a pickle needing arbitrary code) is a ValueError naming the file. The
+    loader's own advice to retry with ``weights_only=False`` is deliberately not passed on:
+    that would run code from an untrusted file."""
     try:
         state = torch.load(weights, map_location="cpu", weights_only=True)
-        policy.load_state_dict(state, strict=True)
-    except (RuntimeError, KeyError, ValueError) as err:
-        raise ValueError(f"{weights} does not hold this policy's weights: {err}") from err
-    return policy.eval(), settings
+    except Exception as err:  # noqa: BLE001  (torch raises OSError, EOFError, UnpicklingError, ...)
+        raise ValueError(f"{weights} is not a policy file: torch could not load it as plain "
+                         f"weights ({type(err).__name__}); is it truncated or another file?"
+                         ) from None
+    if not isinstance(state, dict):
+        raise ValueError(f"{weights} is not a policy file: it holds a {type(state).__name__}, "  # noqa: TRY004  (a bad file is a bad value)
+                         f"not a state dict")
+    return state
 
 
 class PPOAgent:

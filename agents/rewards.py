@@ -21,6 +21,8 @@ import gymnasium as gym
 import numpy as np
 
 from agents.planner import StreetPlanner, path_length
+from envs.datasets import check_city_env
+from localization._validation import check_real
 
 __all__ = ["StreetProgressReward"]
 
@@ -40,10 +42,12 @@ class StreetProgressReward(gym.Wrapper, gym.utils.RecordConstructorArgs):
         gym.utils.RecordConstructorArgs.__init__(self, step_cost=step_cost,
                                                  collision_penalty=collision_penalty,
                                                  success_bonus=success_bonus)
+        base = check_city_env(env)
         gym.Wrapper.__init__(self, env)
-        self.planner = StreetPlanner(env.unwrapped.city)
-        self.step_cost, self.collision_penalty = step_cost, collision_penalty
-        self.success_bonus = success_bonus
+        self.planner = StreetPlanner(base.city)
+        self.step_cost = check_real(step_cost, "step_cost", low=0.0)
+        self.collision_penalty = check_real(collision_penalty, "collision_penalty", low=0.0)
+        self.success_bonus = check_real(success_bonus, "success_bonus", low=0.0)
         self._distance = 0.0
 
     def street_distance(self, pose: np.ndarray) -> float:

@@ -14,14 +14,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.planner import PlannedPath, StreetPlanner
+from agents.planner import PlannedPath, StreetPlanner, check_city_point
 from envs.driving import bearing, pursuit_turn_rate
+from localization._validation import check_array, check_real
 from localization.geometry import Array
 
 __all__ = ["BELIEF_KEYS", "Navigator", "ScriptedAgent", "check_belief_observation",
            "pure_pursuit"]
 
 BELIEF_KEYS = ("pose_mean", "pose_cov", "goal")
+OBS_NAMES = ("obs['pose_mean']", "obs['goal']")  # how Navigator.update names them in errors
 
 
 def check_belief_observation(obs: Any) -> tuple[Array, Array, Array]:
@@ -44,15 +46,9 @@ def check_belief_observation(obs: Any) -> tuple[Array, Array, Array]:
             f"the observation lacks the belief keys {missing} (it has {sorted(obs)}): wrap the env "
             "in a pose source from localization.wrappers (BeliefWrapper, DeadReckoningWrapper or "
             "OracleWrapper) before giving its observations to an agent")
-    out = []
-    for key, size in zip(BELIEF_KEYS, (3, 6, 2)):
-        v = np.asarray(obs[key], dtype=np.float64)
-        if v.shape != (size,):
-            raise ValueError(f"obs[{key!r}] must have shape ({size},), got {v.shape}")
-        if not np.all(np.isfinite(v)):
-            raise ValueError(f"obs[{key!r}] contains NaN or inf: {v}")
-        out.append(v)
-    return out[0], out[1], out[2]
+    mean, cov, goal = (check_array(obs[key], f"obs[{key!r}]", shape=(size,))
+                       for key, size in zip(BELIEF_KEYS, (3, 6, 2)))
+    return mean, cov, goal
 
 
 def pure_pursuit(pose: Array, carrot: Array, remaining: float, speed: float, w_max: float,
@@ -87,7 +83,7 @@ class Navigator:
 
     def __init__(self, city: Any, replan_distance: float = 1.0) -> None:
         self.planner = StreetPlanner(city)
-        self.replan_distance = replan_distance
+        self.replan_distance = check_real(replan_distance, "replan_distance", low=0.0, low_open=True)
         self.reset()
 
     def reset(self) -> None:
@@ -96,9 +92,18 @@ class Navigator:
         self.path: PlannedPath | None = None
         self.replans = 0
 
-    def update(self, pose: Array, goal: Array) -> PlannedPath:
+    def update(self, pose: Array, goal: Array, names: tuple[str, str] = ("pose", "goal")
+               ) -> PlannedPath:
         """Plan (or replan) as needed for the believed pose [x, y, yaw] and advance the
-        progress along the plan."""
+        progress along the plan (``names``: the arguments' names in error messages).
+
+        Raises
+        ------
+        ValueError
+            If the pose or the goal is malformed or far outside the city.
+        """
+        pose = check_city_point(pose, names[0], self.planner.city, sizes=(3,))
+        goal = check_city_point(goal, names[1], self.planner.city, sizes=(2,))
         new_goal = self.goal is None or not np.allclose(goal, self.goal)
         if new_goal or self.path.distance_to(pose[:2]) > self.replan_distance:
             self.replans += not new_goal
@@ -131,8 +136,10 @@ class ScriptedAgent:
     def __init__(self, city: Any, lookahead: float = 0.6, speed: float = 0.9, w_max: float = 1.0,
                  turn_in_place: float = 0.6, replan_distance: float = 1.0) -> None:
         self.navigator = Navigator(city, replan_distance)
-        self.lookahead, self.speed, self.w_max = lookahead, speed, w_max
-        self.turn_in_place = turn_in_place
+        self.lookahead, self.speed, self.w_max, self.turn_in_place = (
+            check_real(v, name, low=0.0, low_open=True) for name, v in (
+                ("lookahead", lookahead), ("speed", speed), ("w_max", w_max),
+                ("turn_in_place", turn_in_place)))
 
     def reset(self) -> None:
         """Forget the current plan."""
@@ -147,7 +154,7 @@ class ScriptedAgent:
     def act(self, obs: Mapping[str, Any]) -> NDArray[np.float32]:
         """The action U = [v, w] for one belief observation."""
         mean, _, goal = check_belief_observation(obs)
-        path = self.navigator.update(mean, goal)
+        path = self.navigator.update(mean, goal, OBS_NAMES)
         u = pure_pursuit(mean, path.ahead(self.lookahead), path.remaining(), self.speed,
                          self.w_max, self.turn_in_place)
         return u.astype(np.float32)

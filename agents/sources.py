@@ -22,7 +22,11 @@ import gymnasium as gym
 import numpy as np
 
 import envs  # noqa: F401  (registers AppearanceNav-v0)
+from envs.appearance_nav import RESET_OPTIONS
+from envs.cameras import check_image_size
+from envs.datasets import check_city_env
 from envs.lanes import lane_poses
+from localization._validation import check_choice, check_options, check_real, check_seed
 from localization.wrappers import BeliefWrapper, DeadReckoningWrapper, OracleWrapper
 
 __all__ = ["POSE_SOURCES", "STARTS", "LaneStart", "make_pose_env"]
@@ -46,15 +50,17 @@ class LaneStart(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def __init__(self, env: gym.Env, lateral: float = 0.2, heading: float = 0.1) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, lateral=lateral, heading=heading)
+        check_city_env(env)
         gym.Wrapper.__init__(self, env)
-        self.lateral, self.heading = lateral, heading
+        self.lateral = check_real(lateral, "lateral", low=0.0)
+        self.heading = check_real(heading, "heading", low=0.0)
         self._rng = np.random.default_rng()
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None,
               ) -> tuple[Any, dict[str, Any]]:
-        if seed is not None:
+        if check_seed(seed, "seed", optional=True) is not None:
             self._rng = np.random.default_rng(seed)
-        options = dict(options or {})
+        options = check_options(options, "options", RESET_OPTIONS)
         if options.get("pose") is None:
             poses, _ = lane_poses(self.env.unwrapped.city, 1, self._rng, "streets",
                                   lateral=self.lateral, heading=self.heading)
@@ -85,14 +91,14 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
     **belief_kwargs
         More BeliefWrapper settings (``gate_probability``, ``relocalize_after``, ...).
     """
-    if source not in POSE_SOURCES:
-        raise ValueError(f"unknown pose source {source!r}; choose one of {POSE_SOURCES}")
-    if source != "oracle" and localizer is None:
-        raise ValueError(f"pose source {source!r} needs a fitted localizer")
-    if start not in STARTS:
-        raise ValueError(f"unknown start {start!r}; choose one of {STARTS}")
+    check_choice(source, "pose source", POSE_SOURCES)
+    check_choice(start, "start", STARTS)
+    if source != "oracle":
+        _check_localizer(localizer, source)
+    if belief_kwargs and source != "belief":
+        raise ValueError(f"belief settings {sorted(belief_kwargs)} apply to source 'belief' only")
     env = gym.make("AppearanceNav-v0", scene_seed=scene_seed, camera=camera,
-                   image_size=tuple(image_size), motion_noise=motion_noise,
+                   image_size=check_image_size(image_size), motion_noise=motion_noise,
                    max_episode_steps=max_episode_steps)
     if start == "lane":
         env = LaneStart(env)
@@ -103,3 +109,12 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
     if measurement is not None:
         belief_kwargs["measurement"] = measurement
     return BeliefWrapper(env, localizer, **belief_kwargs)
+
+
+def _check_localizer(localizer: Any, source: str) -> None:
+    """The belief and dead-reckoning sources need a fitted localizer with its process noise."""
+    if localizer is None:
+        raise ValueError(f"pose source {source!r} needs a fitted localizer (localizer=None)")
+    if getattr(localizer, "process_noise_body_", None) is None:
+        raise ValueError(f"localizer must be a fitted AppearanceLocalizer with its process noise "
+                         f"(fit_process_noise), got {type(localizer).__name__}")

@@ -18,7 +18,7 @@ from envs.scene import City, generate_city
 if "AppearanceNav-v0" not in gym.registry:
     gym.register(
         id="AppearanceNav-v0",
-        entry_point="envs.appearance_nav:AppearanceNavEnv",
+        entry_point="envs.appearance_nav:make_appearance_nav",
         max_episode_steps=500,
     )
 

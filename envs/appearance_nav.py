@@ -28,8 +28,19 @@ from envs.robot import (
     WHEEL_RADIUS,
 )
 from envs.scene import City, generate_city
+from localization._validation import (
+    check_array,
+    check_choice,
+    check_int,
+    check_options,
+    check_real,
+    check_seed,
+)
 
-__all__ = ["AppearanceNavEnv"]
+__all__ = ["RESET_OPTIONS", "AppearanceNavEnv", "make_appearance_nav"]
+
+#: the keys ``reset(options=...)`` understands
+RESET_OPTIONS = ("pose", "goal")
 
 Obs = dict[str, NDArray[Any]]
 
@@ -98,16 +109,15 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         frame_skip: int = 10,
     ) -> None:
         self.image_size = check_image_size(image_size)
-        if not (np.isfinite(motion_noise) and motion_noise >= 0):
-            raise ValueError(f"motion_noise must be a finite number >= 0, got {motion_noise}")
-        if render_mode not in (None, *self.metadata["render_modes"]):
-            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
-        if max_episode_steps is not None and max_episode_steps < 1:
-            raise ValueError(f"max_episode_steps must be >= 1 or None, got {max_episode_steps}")
-        if int(frame_skip) != frame_skip or frame_skip < 1:
-            raise ValueError(f"frame_skip must be a positive integer, got {frame_skip}")
+        self.motion_noise = check_real(motion_noise, "motion_noise", low=0.0)
+        check_choice(render_mode, "render_mode", (None, *self.metadata["render_modes"]))
+        if max_episode_steps is not None:
+            max_episode_steps = check_int(max_episode_steps, "max_episode_steps", low=1)
+        frame_skip = check_int(frame_skip, "frame_skip", low=1)
+        if not isinstance(camera, str):
+            raise TypeError(f"camera must be a camera name (str), got {type(camera).__name__}")
+        scene_seed = check_seed(scene_seed, "scene_seed")
         self.render_mode = render_mode
-        self.motion_noise = float(motion_noise)
         self.max_episode_steps = max_episode_steps
         self.frame_skip = int(frame_skip)
 
@@ -150,11 +160,15 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
 
         Raises
         ------
+        TypeError
+            If ``seed`` is not an integer or ``options`` not a dict.
         ValueError
-            If the pose or goal is malformed, inside a building or outside the city.
+            If ``seed`` is negative, ``options`` has a key other than "pose" and "goal", or
+            the pose or goal is malformed, inside a building or outside the city.
         """
+        seed = check_seed(seed, "seed", optional=True)
+        options = check_options(options, "options", RESET_OPTIONS)
         super().reset(seed=seed)
-        options = options or {}
         mujoco.mj_resetData(self.model, self.data)
         if options.get("pose") is not None:
             pose = self._check_point(options["pose"], 3, "pose", ROBOT_RADIUS)
@@ -217,8 +231,11 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         return self._goal.copy()
 
     def set_pose(self, pose: ArrayLike) -> None:
-        """Teleport the robot to ``pose`` at rest (no validity check) and run ``mj_forward``."""
-        x, y, yaw = np.asarray(pose, dtype=np.float64)
+        """Teleport the robot to ``pose`` [x, y, yaw] at rest and run ``mj_forward``.
+
+        The pose must be finite with shape (3,); it is not checked against the buildings.
+        """
+        x, y, yaw = check_array(pose, "pose", shape=(3,), what="[x, y, yaw]")
         a = self._root_qpos
         self.data.qpos[a : a + 7] = [x, y, WHEEL_RADIUS, np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]
         self.data.qvel[:] = 0.0
@@ -262,28 +279,17 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         return q
 
     def _check_action(self, action: ArrayLike) -> NDArray[np.float64]:
-        try:
-            u = np.asarray(action, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"action must be numeric with shape (2,) [v, w], got {action!r}") from None
-        if u.shape != (2,):
-            raise ValueError(f"action must have shape (2,) [v, w], got shape {u.shape}")
-        v, w = u.tolist()
-        if not (math.isfinite(v) and math.isfinite(w)):
-            raise ValueError(f"action must be finite, got NaN or inf in {u}")
+        v, w = check_array(action, "action", shape=(2,), what="[v, w]").tolist()
         return np.array([min(max(v, -self.V_MAX), self.V_MAX), min(max(w, -self.W_MAX), self.W_MAX)])
 
     def _check_point(self, value: ArrayLike, dim: int, what: str, margin: float) -> NDArray[np.float64]:
-        p = np.asarray(value, dtype=np.float64)
-        if p.shape != (dim,):
-            raise ValueError(f"{what} must have shape ({dim},), got {p.shape}")
-        if not np.all(np.isfinite(p)):
-            raise ValueError(f"{what} must be finite, got {p}")
+        p = check_array(value, f'options["{what}"]', shape=(dim,),
+                        what="[x, y, yaw]" if dim == 3 else "[x, y]").copy()
         lo, hi = self.city.bounds
         if not (lo + margin <= p[0] <= hi - margin and lo + margin <= p[1] <= hi - margin):
-            raise ValueError(f"{what} {p[:2]} is outside the city [{lo}, {hi}]^2 (margin {margin} m)")
+            raise ValueError(f'options["{what}"] {p[:2]} is outside the city [{lo}, {hi}]^2 (margin {margin} m)')
         if not self.city.is_free(p[0], p[1], margin):
-            raise ValueError(f"{what} {p[:2]} is inside a building (needs {margin} m clearance)")
+            raise ValueError(f'options["{what}"] {p[:2]} is inside a building (needs {margin} m clearance)')
         if dim == 3:
             p[2] = wrap_angle(p[2])
         return p
@@ -294,3 +300,13 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
             if np.hypot(*(g - start)) >= self.MIN_GOAL_DISTANCE:
                 return g
         return g
+
+
+def make_appearance_nav(**kwargs: Any) -> AppearanceNavEnv:
+    """``AppearanceNavEnv(**kwargs)``: the entry point of ``AppearanceNav-v0``.
+
+    A function rather than the class, so ``gymnasium.make(..., render_mode="human")`` reaches
+    the constructor's check (a ``ValueError`` naming ``render_mode``) instead of being wrapped
+    silently in a ``HumanRendering`` window this headless env cannot open.
+    """
+    return AppearanceNavEnv(**kwargs)

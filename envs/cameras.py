@@ -40,25 +40,27 @@ class Camera(Protocol):
     def close(self) -> None: ...
 
 
-def check_image_size(image_size: object) -> tuple[int, int]:
+def check_image_size(image_size: object, name: str = "image_size") -> tuple[int, int]:
     """Validate ``(H, W)`` and return it as a tuple of ints.
 
     Raises
     ------
+    TypeError
+        If it is not a pair of integers.
     ValueError
-        If it is not two integers in ``[MIN_IMAGE_SIDE, MAX_IMAGE_SIDE]``.
+        If a side is outside ``[MIN_IMAGE_SIDE, MAX_IMAGE_SIDE]`` or it has another length.
     """
-    try:
-        h, w = image_size  # type: ignore[misc]
-    except (TypeError, ValueError):
-        raise ValueError(f"image_size must be a pair (H, W) of integers, got {image_size!r}") from None
+    if isinstance(image_size, (str, bytes)) or not hasattr(image_size, "__len__"):
+        raise TypeError(f"{name} must be a pair (H, W) of integers, got {image_size!r}")
+    if len(image_size) != 2:  # type: ignore[arg-type]
+        raise ValueError(f"{name} must be a pair (H, W) of integers, got {image_size!r}")
+    h, w = image_size  # type: ignore[misc]
     for v in (h, w):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
-            # the contract: bad inputs raise ValueError
-            raise ValueError(f"image_size must contain integers, got {image_size!r}")  # noqa: TRY004
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
+            raise TypeError(f"{name} must contain integers, got {image_size!r}")
         if not MIN_IMAGE_SIDE <= v <= MAX_IMAGE_SIDE:
             raise ValueError(
-                f"image_size sides must be in [{MIN_IMAGE_SIDE}, {MAX_IMAGE_SIDE}] pixels, got {image_size!r}"
+                f"{name} sides must be in [{MIN_IMAGE_SIDE}, {MAX_IMAGE_SIDE}] pixels, got {image_size!r}"
             )
     return int(h), int(w)
 
@@ -121,6 +123,8 @@ def make_camera(name: str, model: mujoco.MjModel, image_size: tuple[int, int], *
     ValueError
         If ``name`` is not registered (the message lists the known names) or the size is bad.
     """
+    if not isinstance(name, str):
+        raise TypeError(f"camera must be a camera name (str), got {type(name).__name__}")
     if name not in CAMERAS:
         raise ValueError(f"unknown camera {name!r}; known cameras: {sorted(CAMERAS)}")
     return CAMERAS[name](model, check_image_size(image_size), **kwargs)

@@ -42,12 +42,22 @@ from envs.driving import bearing, pursuit_turn_rate
 from envs.lanes import lane_poses, street_tour
 from envs.motion_model import wrap_angle
 from envs.robot import HALF_TRACK, ROBOT_RADIUS, WHEEL_RADIUS
+from localization._validation import (
+    check_bool,
+    check_choice,
+    check_int,
+    check_options,
+    check_real,
+    check_seed,
+)
 from localization.recorded import load_dataset, save_dataset  # the .npz format, one definition
 
 __all__ = ["MODES", "PurePursuit", "collect_dataset", "drive_route", "drive_streets", "grid_poses",
            "load_dataset", "save_dataset"]
 
 MODES = ("grid", "random", "route", "lanes")
+#: the keyword arguments of :func:`envs.lanes.lane_poses` that ``collect_dataset`` passes on
+LANE_OPTIONS = ("lanes", "lateral", "heading", "turn_radius", "turn_weight")
 POSE_MARGIN = ROBOT_RADIUS + 0.1  # m of clearance to buildings for teleported poses
 ROLL_STEPS = 3  # env steps driven into each "lanes" pose
 CRUISE_SPEED = 0.6  # m/s, PurePursuit's default speed
@@ -55,8 +65,9 @@ CRUISE_SPEED = 0.6  # m/s, PurePursuit's default speed
 
 def grid_poses(city: Any, n: int, n_headings: int = 8, margin: float = POSE_MARGIN) -> NDArray[np.float64]:
     """Return n poses (n, 3) from a regular grid of free positions x ``n_headings`` headings."""
-    if n < 1:
-        raise ValueError(f"n must be >= 1, got {n}")
+    n = check_int(n, "n", low=1)
+    n_headings = check_int(n_headings, "n_headings", low=1)
+    margin = check_real(margin, "margin", low=0.0)
     headings = wrap_angle(np.linspace(-np.pi, np.pi, n_headings, endpoint=False) + np.pi / n_headings)
 
     def positions(spacing: float) -> NDArray[np.float64]:
@@ -153,6 +164,15 @@ def _drive_into(base: Any, pose: NDArray[np.float64], curvature: float, steps: i
     return obs["image"], info["pose"]
 
 
+def check_city_env(env: object, name: str = "env") -> Any:
+    """``env.unwrapped`` if ``env`` is an AppearanceNav env (wrapped or not), else ``TypeError``."""
+    base = getattr(env, "unwrapped", None)
+    if not (hasattr(base, "city") and hasattr(base, "render_camera")):
+        raise TypeError(f"{name} must be an AppearanceNav env (gymnasium.make('AppearanceNav-v0')), "
+                        f"got {type(env).__name__}")
+    return base
+
+
 def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n_headings: int = 8,
                     progress: bool = True, **lane_options: Any,
                     ) -> tuple[NDArray[np.uint8], NDArray[np.float64]]:
@@ -179,13 +199,15 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
     images : (n, H, W, 3) uint8
     poses : (n, 3) float64 ``[x, y, yaw]``
     """
-    if mode not in MODES:
-        raise ValueError(f"unknown mode {mode!r}; known modes: {list(MODES)}")
-    if int(n) != n or n < 1:
-        raise ValueError(f"n must be a positive integer, got {n}")
+    base = check_city_env(env)
+    n = check_int(n, "n", low=1)
+    check_choice(mode, "mode", MODES)
+    seed = check_seed(seed, "seed")
+    n_headings = check_int(n_headings, "n_headings", low=1)
+    check_bool(progress, "progress")
+    check_options(lane_options, "lane option", LANE_OPTIONS)
     if lane_options and mode != "lanes":
-        raise ValueError(f"options {sorted(lane_options)} apply to mode 'lanes' only")
-    base = env.unwrapped
+        raise ValueError(f"lane options {sorted(lane_options)} apply to mode 'lanes' only")
     city = base.city
     images = np.empty((n, *base.image_size, 3), np.uint8)
     poses = np.empty((n, 3))
@@ -238,7 +260,9 @@ def drive_route(env: gym.Env, n: int, seed: int = 0, start: int = 0, progress: b
     poses : (n + 1, 3) float64 — true poses.
     controls : (n, 2) float64 — the commanded controls (controls[t] moves poses[t] to poses[t+1]).
     """
-    base = env.unwrapped
+    base = check_city_env(env)
+    _check_drive(n, seed, progress)
+    start = check_int(start, "start")
     pilot = PurePursuit(base.city.route(), w_max=base.W_MAX)
     return _drive(env, pilot, pilot.start_pose(start), n, seed, progress, "drive route")
 
@@ -252,22 +276,23 @@ def drive_streets(env: gym.Env, n: int, seed: int = 0, speed: float = CRUISE_SPE
     The tour (drawn from ``seed``) starts at an intersection, heading along its first street,
     and is long enough for n steps at ``speed``. Arguments and returns as :func:`drive_route`.
     """
-    _check_steps(n)
-    base = env.unwrapped
+    base = check_city_env(env)
+    _check_drive(n, seed, progress)
+    speed = check_real(speed, "speed", low=0.0, low_open=True)
     tour = street_tour(base.city, 1.5 * n * base.dt * speed + 10.0, np.random.default_rng(seed))
     pilot = PurePursuit(tour, speed=speed, w_max=base.W_MAX, closed=False)
     return _drive(env, pilot, pilot.start_pose(0), n, seed, progress, "drive streets")
 
 
-def _check_steps(n: int) -> None:
-    if int(n) != n or n < 1:
-        raise ValueError(f"n must be a positive integer, got {n}")
+def _check_drive(n: object, seed: object, progress: object) -> None:
+    check_int(n, "n", low=1)
+    check_seed(seed, "seed")
+    check_bool(progress, "progress")
 
 
 def _drive(env: gym.Env, pilot: PurePursuit, start: NDArray[np.float64], n: int, seed: int,
            progress: bool, desc: str,
            ) -> tuple[NDArray[np.uint8], NDArray[np.float64], NDArray[np.float64]]:
-    _check_steps(n)
     base = env.unwrapped
     obs, info = base.reset(seed=seed, options={"pose": start})
     images = np.empty((n + 1, *base.image_size, 3), np.uint8)

@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from envs.motion_model import wrap_angle
+from localization._validation import check_choice, check_int, check_real
 
 LANE_SETS = ("streets", "route")
 
@@ -85,10 +86,8 @@ def street_lanes(city: Any, lanes: str = "streets", turn_radius: float = 0.8) ->
     ValueError
         For an unknown lane set or a non-positive turn radius.
     """
-    if lanes not in LANE_SETS:
-        raise ValueError(f"unknown lanes {lanes!r}; choose one of {LANE_SETS}")
-    if not turn_radius > 0:
-        raise ValueError(f"turn_radius must be > 0, got {turn_radius}")
+    check_choice(lanes, "lanes", LANE_SETS)
+    turn_radius = check_real(turn_radius, "turn_radius", low=0.0, low_open=True)
     out: list[Lane] = []
 
     def segment(a: NDArray[np.float64], b: NDArray[np.float64]) -> None:
@@ -150,11 +149,11 @@ def lane_poses(city: Any, n: int, rng: np.random.Generator, lanes: str = "street
     curvature : (n,) float64
         Signed curvature (1/m) of the lane each pose came from (0 on straight segments).
     """
-    if int(n) != n or n < 1:
-        raise ValueError(f"n must be a positive integer, got {n}")
-    if lateral < 0 or heading < 0 or turn_weight < 0:
-        raise ValueError(f"lateral, heading and turn_weight must be >= 0, got "
-                         f"{lateral}, {heading}, {turn_weight}")
+    n = check_int(n, "n", low=1)
+    for name, value in (("lateral", lateral), ("heading", heading), ("turn_weight", turn_weight),
+                        ("margin", margin)):
+        check_real(value, name, low=0.0)
+    check_real(turn_radius, "turn_radius", low=0.0, low_open=True)
     pieces = street_lanes(city, lanes, turn_radius)
     weight = np.array([p.length * (1.0 if p.turn == 0 else
                                    np.sqrt(1.0 + (turn_weight / turn_radius) ** 2))
@@ -191,8 +190,7 @@ def street_tour(city: Any, length: float, rng: np.random.Generator) -> NDArray[n
     ValueError
         For a non-positive length.
     """
-    if not length > 0:
-        raise ValueError(f"length must be > 0, got {length}")
+    length = check_real(length, "length", low=0.0, low_open=True)
     nodes, edges = city.street_graph()
     neighbours: dict[int, list[int]] = {i: [] for i in range(len(nodes))}
     for i, j in edges:

@@ -18,21 +18,15 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from localization._validation import check_array, check_real
 from localization.geometry import wrap_angle
 
 _SMALL_W = 1e-6
 
 
 def _check(pose: ArrayLike, u: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    pose = np.asarray(pose, dtype=np.float64)
-    u = np.asarray(u, dtype=np.float64)
-    if pose.shape != (3,):
-        raise ValueError(f"pose must have shape (3,) [x, y, yaw], got {pose.shape}")
-    if u.shape != (2,):
-        raise ValueError(f"control must have shape (2,) [v, w], got {u.shape}")
-    if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(u))):
-        raise ValueError("pose and control must be finite (found NaN or inf)")
-    return pose, u
+    return (check_array(pose, "pose", shape=(3,), what="[x, y, yaw]"),
+            check_array(u, "u", shape=(2,), what="[v, w] (the control)"))
 
 
 class UnicycleModel:
@@ -45,9 +39,7 @@ class UnicycleModel:
     """
 
     def __init__(self, dt: float) -> None:
-        if not (np.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be a positive finite number, got {dt}")
-        self.dt = float(dt)
+        self.dt = check_real(dt, "dt", low=0.0, low_open=True)
 
     def __repr__(self) -> str:
         return f"UnicycleModel(dt={self.dt})"

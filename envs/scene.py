@@ -21,6 +21,8 @@ from itertools import pairwise
 import numpy as np
 from numpy.typing import NDArray
 
+from localization._validation import check_int, check_real, check_seed
+
 __all__ = ["Building", "City", "generate_city"]
 
 _LANDMARK_COLOURS = np.array(
@@ -426,9 +428,11 @@ def generate_city(
     max_height : float — tallest ordinary building (m); landmarks are taller.
     n_landmarks : int — number of tall, saturated towers (one per chosen block).
     """
-    for name, v in (("city_size", city_size), ("block_size", block_size), ("street_width", street_width)):
-        if not (np.isfinite(v) and v > 0):
-            raise ValueError(f"{name} must be a positive finite number, got {v}")
+    seed = check_seed(seed, "seed")
+    for name, v in (("city_size", city_size), ("block_size", block_size), ("street_width", street_width),
+                    ("max_height", max_height)):
+        check_real(v, name, low=0.0, low_open=True)
+    check_int(n_landmarks, "n_landmarks", low=0)
     rng = np.random.default_rng(seed)
     centers = _street_centers(city_size, block_size, street_width)
     half_w = 0.5 * street_width

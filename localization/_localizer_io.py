@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import json
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +24,9 @@ _ATTRS = {"noise": "noise_", "rms": "residual_rms_", "tau": "correlation_time_",
 
 
 def save_localizer(loc: Any, path: str | Path) -> None:
-    """Write a fitted localizer to ``path`` (``np.savez_compressed``)."""
+    """Write a fitted localizer to ``path`` (``np.savez_compressed``), creating its folder."""
+    path = _check_path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     buf = io.BytesIO()
     loc.regressor_.save(buf)
     settings = {"format": FORMAT, "params": loc.get_params(), "camera": loc.camera_,
@@ -42,13 +45,20 @@ def save_localizer(loc: Any, path: str | Path) -> None:
 
 def load_localizer(cls: type, path: str | Path) -> Any:
     """Rebuild a localizer written by :func:`save_localizer`; ValueError if the file is not
-    one, or is corrupted or incomplete."""
+    one, or is corrupted or incomplete; FileNotFoundError if there is no such file."""
+    path = _check_path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no saved AppearanceLocalizer file {path}")
     try:
         with np.load(path, allow_pickle=False) as f:
             data = {k: f[k] for k in f.files}
         settings = json.loads(str(data.pop("settings")))
-    except Exception as err:  # OSError, zipfile, EOFError, JSON, missing key
-        raise ValueError(f"{path} is not a saved AppearanceLocalizer: {err}") from err
+    except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile) as err:
+        # unreadable, truncated, not a zip, not JSON (JSONDecodeError is a ValueError), no key
+        raise ValueError(f"{path} is not a saved AppearanceLocalizer: {err}") from None
+    if not isinstance(settings, dict):
+        raise ValueError(f"{path} is not a saved AppearanceLocalizer (settings are not a JSON "  # noqa: TRY004  (a bad file is a bad value)
+                         f"object)")
     if settings.get("format") != FORMAT:
         raise ValueError(f"{path}: unknown format {settings.get('format')!r} (want {FORMAT})")
     try:
@@ -71,3 +81,9 @@ def load_localizer(cls: type, path: str | Path) -> Any:
         raise ValueError(f"{path}: corrupted or incomplete localizer "
                          f"({type(err).__name__}: {err})") from err
     return loc
+
+
+def _check_path(path: object) -> Path:
+    if not isinstance(path, (str, Path)):
+        raise TypeError(f"path must be a str or pathlib.Path, got {type(path).__name__}")
+    return Path(path)

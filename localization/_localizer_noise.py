@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from sklearn.model_selection import KFold
 
+from localization._validation import check_array, check_images
 from localization.filtering.calibration import calibrate_consistency
 from localization.filtering.measurement_noise import (
     correlation_time,
@@ -29,15 +30,20 @@ MEASUREMENTS = ("pose", "features", "representation")
 
 def check_data(images: ArrayLike, poses: ArrayLike, what: str = ""
                ) -> tuple[NDArray[np.uint8], Array]:
-    """Validate uint8 images (n, H, W, 3) and finite poses (n, 3)."""
-    images, poses = np.asarray(images), np.asarray(poses, dtype=np.float64)
-    if images.ndim != 4 or images.shape[-1] != 3 or images.dtype != np.uint8:
+    """Validate uint8 images (n, H, W, 3) and finite poses (n, 3).
+
+    Raises
+    ------
+    TypeError
+        If the images or poses are not real numbers (complex, bool, strings, objects).
+    ValueError
+        If a shape or the images' dtype is wrong, or the poses hold NaN/inf.
+    """
+    images = check_images(images, f"{what}images")
+    if images.shape[-1] != 3 or images.dtype != np.uint8:
         raise ValueError(f"{what}images must be uint8 of shape (n, H, W, 3), got "
                          f"{images.shape} {images.dtype}")
-    if poses.shape != (len(images), 3):
-        raise ValueError(f"{what}poses must have shape ({len(images)}, 3), got {poses.shape}")
-    if not np.all(np.isfinite(poses)):
-        raise ValueError(f"{what}poses contain NaN or inf")
+    poses = check_array(poses, f"{what}poses", shape=(len(images), 3), what="[x, y, yaw]")
     return images, poses
 
 

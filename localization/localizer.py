@@ -46,6 +46,14 @@ from sklearn.exceptions import NotFittedError
 
 from localization._localizer_io import load_localizer, save_localizer
 from localization._localizer_noise import MEASUREMENTS, NoiseModelMixin, check_data
+from localization._validation import (
+    check_array,
+    check_choice,
+    check_images,
+    check_int,
+    check_real,
+    check_seed,
+)
 from localization.features import make_features
 from localization.filtering.ekf import FunctionMeasurement
 from localization.filtering.measurement_noise import inflate
@@ -153,13 +161,12 @@ class AppearanceLocalizer(NoiseModelMixin):
         -------
         self
         """
+        self._check_params()
         images, poses = check_data(images, poses)
+        if camera is not None and not isinstance(camera, str):
+            raise TypeError(f"camera must be a camera name (str) or None, got {type(camera).__name__}")
         self._row_slice(images.shape[1])  # validates rows
-        if int(self.noise_folds) < 0 or int(self.noise_folds) == 1:
-            raise ValueError(f"noise_folds must be 0 or >= 2, got {self.noise_folds}")
         if isinstance(self.yaw_cut, str):
-            if self.yaw_cut != "auto":
-                raise ValueError(f"yaw_cut must be 'auto' or a number, got {self.yaw_cut!r}")
             self.yaw_cut_ = sparsest_heading(poses[:, 2])
         else:
             self.yaw_cut_ = float(wrap_angle(float(self.yaw_cut)))
@@ -178,6 +185,28 @@ class AppearanceLocalizer(NoiseModelMixin):
         self.process_noise_body_: Array | None = None
         self.control_gain_ = np.ones(2)
         return self
+
+    def _check_params(self) -> None:
+        """Validate the constructor's hyperparameters (scikit-learn style: at fit time)."""
+        if not isinstance(self.features, str):
+            raise TypeError(f"features must be an extractor name (str), got "
+                            f"{type(self.features).__name__}")
+        for name in ("features_params", "regressor_params"):
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, dict):
+                raise TypeError(f"{name} must be a dict or None, got {type(value).__name__}")
+        rows = check_array(self.rows, "rows", shape=(2,), what="(start, stop) fractions")
+        if not 0.0 <= rows[0] < rows[1] <= 1.0:
+            raise ValueError(f"rows must be fractions 0 <= start < stop <= 1, got {self.rows}")
+        folds = check_int(self.noise_folds, "noise_folds", low=0)
+        if folds == 1:
+            raise ValueError(f"noise_folds must be 0 or >= 2, got {self.noise_folds}")
+        if isinstance(self.yaw_cut, str):
+            if self.yaw_cut != "auto":
+                raise ValueError(f"yaw_cut must be 'auto' or a number, got {self.yaw_cut!r}")
+        else:
+            check_real(self.yaw_cut, "yaw_cut")
+        check_seed(self.random_state, "random_state")
 
     def _row_slice(self, height: int) -> slice:
         a, b = (float(r) for r in self.rows)
@@ -216,7 +245,7 @@ class AppearanceLocalizer(NoiseModelMixin):
     def check_images(self, images: ArrayLike) -> NDArray[np.uint8]:
         """Validate an image (H, W, 3) or batch (n, H, W, 3) against the fitted image size."""
         self._check_fitted()
-        images = np.asarray(images)
+        images = check_images(images, "images", single=np.ndim(images) == 3)
         if images.ndim == 3:
             images = images[None]
         if images.ndim != 4 or images.shape[-1] != 3:
@@ -245,9 +274,11 @@ class AppearanceLocalizer(NoiseModelMixin):
         NaN entries mean that w lies outside the training domain (no measurement).
         """
         self._check_fitted()
-        w = np.asarray(w, dtype=np.float64).reshape(1, -1)
-        if not np.all(np.isfinite(w)):
-            raise ValueError("features contain NaN or inf")
+        check_choice(measurement, "measurement", MEASUREMENTS)
+        w = check_array(w, "w")
+        if w.ndim != 1 and w.shape[:-1] != (1,) * (w.ndim - 1):
+            raise ValueError(f"w must be one feature vector of shape (m,), got shape {w.shape}")
+        w = w.reshape(1, -1)
         if measurement == "pose":
             return self._from_model(self.regressor_.predict(w))[0]
         if measurement == "features":
@@ -271,10 +302,9 @@ class AppearanceLocalizer(NoiseModelMixin):
         calibrated ``consistency(measurement)``), the features' R by its mean. ``h`` and
         ``H`` are NaN outside the training domain.
         """
+        check_choice(measurement, "measurement", MEASUREMENTS)
         self._check_fitted(noise=True)
-        if measurement not in MEASUREMENTS:
-            raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
-        alpha = self.consistency(measurement) if alpha is None else np.asarray(alpha, float)
+        alpha = self.consistency(measurement) if alpha is None else _check_alpha(alpha)
         reg, to_model = self.regressor_, self._to_model
         if measurement == "features":
             return FunctionMeasurement(
@@ -323,6 +353,8 @@ class AppearanceLocalizer(NoiseModelMixin):
         if getattr(self, "process_noise_body_", None) is None:
             raise NotFittedError("process noise not estimated: call fit_noise() or "
                                  "fit_process_noise() first")
+        pose = check_array(pose, "pose", shape=(3,), what="[x, y, yaw]")
+        alpha = None if alpha is None else _check_alpha(alpha)
         Q = self.process_noise_body_ if alpha is None else inflate(self.process_noise_body_, alpha)
         return world_process_noise(Q, pose)
 
@@ -335,7 +367,8 @@ class AppearanceLocalizer(NoiseModelMixin):
                 "random_state": self.random_state}
 
     def save(self, path: str | Path) -> None:
-        """Save to one ``.npz`` (no pickle): settings as JSON, arrays by name."""
+        """Save to one ``.npz`` (no pickle): settings as JSON, arrays by name. The parent
+        folder is created if missing."""
         self._check_fitted()
         save_localizer(self, path)
 
@@ -345,7 +378,17 @@ class AppearanceLocalizer(NoiseModelMixin):
 
         Raises
         ------
+        FileNotFoundError
+            If there is no such file.
         ValueError
             If the file is not a saved localizer, is corrupted or incomplete.
         """
         return load_localizer(cls, path)
+
+
+def _check_alpha(alpha: ArrayLike) -> Array:
+    """A body-frame inflation: a positive number or (3,) positive numbers."""
+    a = check_array(alpha, "alpha")
+    if a.shape not in ((), (3,)) or np.any(a <= 0):
+        raise ValueError(f"alpha must be a positive number or 3 positive numbers, got {alpha}")
+    return a

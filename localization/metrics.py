@@ -20,6 +20,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from localization._validation import check_array
 from localization.geometry import Array, wrap_angle
 
 __all__ = ["angular_error", "angular_rmse", "rmse", "rrmse", "wrap_angle"]
@@ -27,8 +28,8 @@ __all__ = ["angular_error", "angular_rmse", "rmse", "rrmse", "wrap_angle"]
 
 def _as_pair(a: ArrayLike, b: ArrayLike, names: tuple[str, str]) -> tuple[Array, Array]:
     """Validate two arrays of equal shape, 1-D (n,) promoted to (n, 1)."""
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
+    a = check_array(a, names[0], finite=False)
+    b = check_array(b, names[1], finite=False)
     if a.ndim == 1:
         a = a[:, None]
     if b.ndim == 1:

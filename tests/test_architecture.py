@@ -14,8 +14,8 @@ PACKAGES = ("envs", "localization", "agents")
 
 #: lowest layer first; a module may import only from its own layer or lower ones
 LAYERS: list[tuple[str, ...]] = [
-    ("localization", "localization.geometry", "localization._lazy", "localization.recorded",
-     "localization._tum"),
+    ("localization", "localization.geometry", "localization._lazy", "localization._validation",
+     "localization.recorded", "localization._tum"),
     ("envs",),
     ("localization.features",),
     ("localization.gse", "localization.metrics", "localization.model_selection",

@@ -39,7 +39,13 @@ def test_other_registered_cameras_work_in_env(name):
     env.close()
 
 
-@pytest.mark.parametrize("size", [(15, 64), (64, 2000), (64.0, 64), (True, 64), "64x64", (64, 64, 3)])
+@pytest.mark.parametrize("size", [(15, 64), (64, 2000), (64, 64, 3)])
 def test_bad_image_sizes(size):
     with pytest.raises(ValueError, match="image_size"):
+        check_image_size(size)
+
+
+@pytest.mark.parametrize("size", [(64.0, 64), (True, 64), "64x64"])
+def test_wrong_type_image_sizes(size):
+    with pytest.raises(TypeError, match="image_size"):
         check_image_size(size)

@@ -168,14 +168,19 @@ def test_out_of_range_action_is_clipped(env):
     [
         ({"camera": "pinhole"}, "perspective"),
         ({"image_size": (8, 8)}, "image_size"),
-        ({"image_size": (64.5, 64)}, "integers"),
-        ({"image_size": 64}, "pair"),
         ({"motion_noise": -1.0}, "motion_noise"),
         ({"render_mode": "human"}, "render_mode"),
     ],
 )
 def test_bad_constructor_args_raise(kwargs, match):
     with pytest.raises(ValueError, match=match):
+        AppearanceNavEnv(**kwargs)
+
+
+@pytest.mark.parametrize("kwargs, match", [({"image_size": (64.5, 64)}, "integers"),
+                                           ({"image_size": 64}, "pair")])
+def test_wrong_type_constructor_args_raise(kwargs, match):
+    with pytest.raises(TypeError, match=match):
         AppearanceNavEnv(**kwargs)
 
 
