@@ -347,6 +347,14 @@ class AppearanceLocalizer(NoiseModelMixin):
         return (np.array([*poses[:, :2].mean(axis=0), 0.0]),
                 np.diag([*poses[:, :2].var(axis=0), np.pi ** 2 / 3.0]))
 
+    def check_ready(self) -> None:
+        """Raise NotFittedError unless the localizer can drive a pose belief: fitted, with its
+        measurement noise and its process noise (:meth:`fit_noise`)."""
+        self._check_fitted(noise=True)
+        if getattr(self, "process_noise_body_", None) is None:
+            raise NotFittedError("the localizer has no process noise: call fit_noise() or "
+                                 "fit_process_noise() first")
+
     def process_noise(self, pose: ArrayLike, alpha: ArrayLike | None = None) -> Array:
         """Q(x) (3, 3) in the world frame at ``pose``: ``T(yaw) Q_body T(yaw)^T`` with
         Q_body inflated by ``alpha`` (default none)."""

@@ -27,10 +27,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike
-from sklearn.exceptions import NotFittedError
 
+from localization._validation import check_bool, check_choice
 from localization.filtering.belief import BeliefFilter
-from localization.filtering.ekf import PoseEKF
+from localization.filtering.ekf import PoseEKF, check_gate_probability
 from localization.filtering.process_noise import world_process_noise
 from localization.geometry import Array, cov_to_triu, wrap_angle
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer
@@ -46,6 +46,10 @@ class _PoseObservation(gym.ObservationWrapper):
     """Shared part: the belief Dict space and the observation from a mean and covariance."""
 
     def __init__(self, env: gym.Env, keep_image: bool) -> None:
+        if not isinstance(env, gym.Env):
+            raise TypeError(f"env must be a gymnasium.Env (e.g. gymnasium.make(\"AppearanceNav-v0\")), "
+                            f"got {type(env).__name__}")
+        keep_image = check_bool(keep_image, "keep_image")
         gym.ObservationWrapper.__init__(self, env)
         space = env.observation_space
         if not (isinstance(space, spaces.Dict) and "image" in space.spaces
@@ -127,8 +131,8 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
             self, localizer=localizer, measurement=measurement, keep_image=keep_image,
             gate_probability=gate_probability, relocalize_after=relocalize_after,
             inflate_after=inflate_after)
-        if measurement not in MEASUREMENTS:
-            raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
+        check_choice(measurement, "measurement", MEASUREMENTS)
+        gate_probability = check_gate_probability(gate_probability)
         _PoseObservation.__init__(self, env, keep_image)
         self._check_compatible(env, localizer)
         self.localizer = localizer
@@ -141,11 +145,10 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
 
     @staticmethod
     def _check_compatible(env: gym.Env, localizer: AppearanceLocalizer) -> None:
-        if not hasattr(localizer, "regressor_"):
-            raise NotFittedError("the localizer is not fitted: call localizer.fit() first")
-        if getattr(localizer, "process_noise_body_", None) is None:
-            raise NotFittedError("the localizer has no process noise: call "
-                                 "localizer.fit_noise() first")
+        if not isinstance(localizer, AppearanceLocalizer):
+            raise TypeError("localizer must be a fitted AppearanceLocalizer, got "
+                            f"{type(localizer).__name__}")
+        localizer.check_ready()
         image_shape = tuple(env.observation_space["image"].shape[:2])
         if image_shape != tuple(localizer.image_size_):
             raise ValueError(f"the localizer was fitted on {tuple(localizer.image_size_)} "

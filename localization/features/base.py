@@ -121,7 +121,7 @@ class FeatureExtractor(TransformerMixin, BaseEstimator):
         self._check_fitted()
         images = check_images(images)
         if tuple(images.shape[1:3]) != tuple(self.image_shape_):
-            raise ValueError(f"image size {tuple(images.shape[1:3])} differs from the size "
+            raise ValueError(f"images: image size {tuple(images.shape[1:3])} differs from the size "
                              f"{tuple(self.image_shape_)} this {type(self).__name__} was fitted on")
         return self._checked(self._transform(images))
 

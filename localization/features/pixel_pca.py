@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from localization._validation import check_int
 from localization.features._pca import fit_pca, pca_from_state, pca_state
 from localization.features.base import FeatureExtractor
 
@@ -60,8 +61,7 @@ class PixelPCA(FeatureExtractor):
         return x.reshape(len(x), -1)
 
     def _fit(self, images: np.ndarray, y: Any = None) -> None:
-        if int(self.n_components) < 1:
-            raise ValueError(f"n_components must be >= 1, got {self.n_components}")
+        check_int(self.n_components, "n_components", low=1)
         self.pca_ = fit_pca(self._pixels(images), self.n_components, self.whiten,
                             self.random_state)
 

@@ -28,7 +28,14 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
-from localization.filtering.ekf import OutOfDomainError, PoseEKF, UpdateResult
+from localization._validation import check_int, check_real
+from localization.filtering.ekf import (
+    OutOfDomainError,
+    PoseEKF,
+    UpdateResult,
+    check_gate_probability,
+    check_motion_model,
+)
 from localization.geometry import Array
 
 
@@ -45,6 +52,20 @@ class Localizer(Protocol):
     def initial_belief(self, w: ArrayLike) -> tuple[Array, Array]: ...
     def prior(self) -> tuple[Array, Array]: ...
     def measure(self, w: ArrayLike, measurement: str) -> Array: ...
+
+
+
+def check_localizer(localizer: object) -> Localizer:
+    """``localizer`` if it is a :class:`Localizer` (TypeError otherwise); a localizer that can
+    tell (``check_ready``) raises its own error when it is not fitted or has no noise model."""
+    names = ("measurement_model", "process_noise", "initial_belief", "measure", "consistency")
+    if not all(callable(getattr(localizer, m, None)) for m in names):
+        raise TypeError("localizer must be a fitted localizer (e.g. AppearanceLocalizer), got "
+                        f"{type(localizer).__name__}")
+    check_ready = getattr(localizer, "check_ready", None)
+    if callable(check_ready):
+        check_ready()
+    return localizer  # type: ignore[return-value]
 
 
 STATUSES = ("initial", "accepted", "gated", "out_of_domain", "relocalized")
@@ -86,12 +107,14 @@ class BeliefFilter:
                  gate_probability: float | None = 0.997, relocalize_after: int | None = 50,
                  alpha: ArrayLike | None = None, inflate_after: int | None = 3,
                  inflate_factor: float = 2.0) -> None:
-        if relocalize_after is not None and relocalize_after < 1:
-            raise ValueError(f"relocalize_after must be >= 1 or None, got {relocalize_after}")
-        if inflate_after is not None and inflate_after < 1:
-            raise ValueError(f"inflate_after must be >= 1 or None, got {inflate_after}")
-        if not inflate_factor >= 1.0:
-            raise ValueError(f"inflate_factor must be >= 1, got {inflate_factor}")
+        check_localizer(localizer)
+        motion_model = check_motion_model(motion_model)
+        gate_probability = check_gate_probability(gate_probability)
+        if relocalize_after is not None:
+            relocalize_after = check_int(relocalize_after, "relocalize_after", low=1)
+        if inflate_after is not None:
+            inflate_after = check_int(inflate_after, "inflate_after", low=1)
+        inflate_factor = check_real(inflate_factor, "inflate_factor", low=1.0)
         self.inflate_after, self.inflate_factor = inflate_after, float(inflate_factor)
         self.localizer = localizer
         self.motion_model = motion_model

@@ -29,6 +29,7 @@ from numpy.typing import ArrayLike
 from scipy.linalg import LinAlgError, cho_factor, cho_solve
 from scipy.stats import chi2
 
+from localization._validation import check_array, check_real
 from localization.geometry import Array, MotionModel, pose_residual, wrap_angle
 
 QFunction = Callable[[Array, Array], Array]
@@ -83,21 +84,28 @@ def _gate_threshold(gate_probability: float | None, dim_z: int) -> float:
 
 
 def _finite_vector(v: ArrayLike, name: str, dim: int | None = None) -> Array:
-    v = np.asarray(v, dtype=np.float64)
-    if v.ndim != 1 or (dim is not None and v.shape != (dim,)):
-        raise ValueError(f"{name} must have shape ({dim or 'n'},), got {v.shape}")
-    if not np.all(np.isfinite(v)):
-        raise ValueError(f"{name} contains NaN or inf: {v}")
-    return v
+    return check_array(v, name, shape=(dim,))
+
+
+def check_gate_probability(gate_probability: object) -> float | None:
+    """The NIS gate's chi-square probability: a number in (0, 1), or None (no gate)."""
+    if gate_probability is None:
+        return None
+    return check_real(gate_probability, "gate_probability", low=0.0, high=1.0, low_open=True,
+                      high_open=True)
+
+
+def check_motion_model(motion_model: object) -> MotionModel:
+    """``motion_model`` if it has F's ``predict`` and ``jacobian_pose`` (TypeError otherwise)."""
+    if not all(callable(getattr(motion_model, m, None)) for m in ("predict", "jacobian_pose")):
+        raise TypeError("motion_model must have predict(pose, u) and jacobian_pose(pose, u) "
+                        f"(e.g. envs.motion_model.UnicycleModel), got {type(motion_model).__name__}")
+    return motion_model  # type: ignore[return-value]
 
 
 def _covariance(C: ArrayLike, name: str, dim: int, definite: bool = True) -> Array:
     """Return C as float64 after checking shape (dim, dim), finiteness, symmetry and definiteness."""
-    C = np.asarray(C, dtype=np.float64)
-    if C.shape != (dim, dim):
-        raise ValueError(f"{name} must have shape ({dim}, {dim}), got {C.shape}")
-    if not np.all(np.isfinite(C)):
-        raise ValueError(f"{name} contains NaN or inf")
+    C = check_array(C, name, shape=(dim, dim))
     scale = max(1.0, float(np.max(np.abs(C))))
     if not np.allclose(C, C.T, rtol=0.0, atol=_SYM_TOL * scale):
         raise ValueError(f"{name} must be symmetric (max |C - C^T| = {np.max(np.abs(C - C.T)):.3g})")
@@ -143,9 +151,7 @@ class FunctionMeasurement:
         if callable(R):
             self.R = R
         else:
-            R = np.asarray(R, dtype=np.float64)
-            if R.ndim != 2:
-                raise ValueError(f"R must be a (dim_z, dim_z) matrix, got shape {R.shape}")
+            R = check_array(R, "R", ndim=2, what="(dim_z, dim_z)")
             self.R = _covariance(R, "R", R.shape[0])
         self._residual = residual
 
@@ -244,9 +250,8 @@ class PoseEKF(ExtendedKalmanFilter):
         gate_probability: float | None = 0.997,
     ) -> None:
         super().__init__(dim_x=3, dim_z=3, dim_u=2)
-        if gate_probability is not None and not 0.0 < gate_probability < 1.0:
-            raise ValueError(f"gate_probability must be in (0, 1) or None, got {gate_probability}")
-        self.motion_model = motion_model
+        gate_probability = check_gate_probability(gate_probability)
+        self.motion_model = check_motion_model(motion_model)
         self.gate_probability = gate_probability
         self._Q_fun: QFunction | None = Q if callable(Q) else None
         if self._Q_fun is None:
@@ -290,6 +295,9 @@ class PoseEKF(ExtendedKalmanFilter):
             If z is not finite, or shapes of z, h(x), H(x), R disagree, or R is not symmetric
             positive definite.
         """
+        if not all(callable(getattr(model, m, None)) for m in ("h", "H", "residual")):
+            raise TypeError("model must be a measurement model with h(x), H(x), R and "
+                            f"residual(z, z_pred), got {type(model).__name__}")
         z_pred = np.asarray(model.h(self.x), dtype=np.float64)
         if z_pred.ndim != 1:
             raise ValueError(f"h(x) must have shape (dim_z,), got {z_pred.shape}")
@@ -297,11 +305,9 @@ class PoseEKF(ExtendedKalmanFilter):
             raise OutOfDomainError(f"the measurement model has no prediction at x = {self.x}")
         z_pred = _finite_vector(z_pred, "h(x)")
         dim_z = z_pred.shape[0]
-        z = np.asarray(z, dtype=np.float64)
+        z = check_array(z, "z", ndim=1)
         if z.shape != (dim_z,):
             raise ValueError(f"z has shape {z.shape} but the model predicts shape {(dim_z,)}")
-        if not np.all(np.isfinite(z)):
-            raise ValueError("measurement z contains NaN or inf")
         H = np.asarray(model.H(self.x), dtype=np.float64)
         if H.shape != (dim_z, 3):
             raise ValueError(f"H(x) must have shape {(dim_z, 3)}, got {H.shape}")

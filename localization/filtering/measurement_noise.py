@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike
 from scipy.stats import chi2
 from sklearn.covariance import MinCovDet
 
+from localization._validation import check_array
 from localization.geometry import Array, to_body
 
 
@@ -47,7 +48,7 @@ def robust_covariance(residuals: ArrayLike, random_state: int = 0) -> Array:
     ValueError
         With fewer than ``5 k`` finite rows.
     """
-    e = np.asarray(residuals, dtype=np.float64)
+    e = check_array(residuals, "residuals", finite=False)
     if e.ndim != 2:
         raise ValueError(f"residuals must be 2-D (n, k), got shape {e.shape}")
     e = e[np.all(np.isfinite(e), axis=1)]
@@ -85,9 +86,9 @@ def correlation_time(residuals: ArrayLike, covariance: ArrayLike | None = None,
     -------
     tau : ndarray (k,), >= 1
     """
-    e = np.array(residuals, dtype=np.float64)
-    if e.ndim != 2 or block < 1 or len(e) < 4 * block:
-        raise ValueError(f"need a (n, k) residual sequence with n >= 4 * block = {4 * block}, "
+    e = check_array(residuals, "residuals", ndim=2, finite=False).copy()
+    if block < 1 or len(e) < 4 * block:
+        raise ValueError(f"residuals: need a (n, k) residual sequence with n >= 4 * block = {4 * block}, "
                          f"got shape {e.shape}")
     e[~np.isfinite(e)] = 0.0
     if covariance is not None:
@@ -171,5 +172,11 @@ def consistency_inflation(run: Callable[[Array], tuple[Array, Array]], poses: Ar
 
 def inflate(C: ArrayLike, alpha: ArrayLike) -> Array:
     """``D C D`` with ``D = diag(sqrt(alpha))``: covariance C with component j scaled by alpha_j."""
-    d = np.sqrt(np.asarray(alpha, dtype=np.float64))
-    return d[:, None] * np.asarray(C, dtype=np.float64) * d[None, :]
+    C = check_array(C, "C", ndim=2)
+    if C.shape[0] != C.shape[1]:
+        raise ValueError(f"C must be a square covariance matrix, got shape {C.shape}")
+    alpha = check_array(alpha, "alpha", shape=(len(C),))
+    if np.any(alpha < 0):
+        raise ValueError(f"alpha must be non-negative factors, got {alpha}")
+    d = np.sqrt(alpha)
+    return d[:, None] * C * d[None, :]

@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
+from localization._validation import check_array
 from localization.geometry import MotionModel, body_rotation, wrap_angle
 
 
@@ -145,6 +146,7 @@ def estimate_process_noise(model: MotionModel, poses: ArrayLike, controls: Array
 
 def world_process_noise(Q_body: NDArray[np.float64], pose: ArrayLike) -> NDArray[np.float64]:
     """Q(x) = T(yaw) Q_body T(yaw)^T at the pose ``x``."""
-    T = body_rotation(float(np.asarray(pose)[2]))
+    Q_body = check_array(Q_body, "Q_body", shape=(3, 3))
+    T = body_rotation(float(check_array(pose, "pose", shape=(3,), what="[x, y, yaw]")[2]))
     return T @ Q_body @ T.T
 
