@@ -34,6 +34,7 @@ from localization.gse.alignment import (
     grassmann_kernel,
     landmark_frames,
 )
+from localization.gse.estimator_checks import embedding_expected_failed_checks
 from localization.gse.graph import (
     _CHUNK,
     Array,
@@ -74,41 +75,6 @@ def embed_from_frames(Z: Array, H: Array, ei: Array, ej: Array, K: Array) -> Arr
     for c in range(q):
         Y[:, c], _ = cg(L, B[:, c], rtol=1e-11, atol=0.0, maxiter=20 * n, M=P)
     return Y - Y.mean(axis=0)
-
-
-#: Training sets of scikit-learn's estimator checks that are small or have 2 features.
-_CHECK_SIZES = {"check_estimators_nan_inf": 10, "check_n_features_in_after_fitting": 15}
-_CHECK_TWO_FEATURES = ("check_estimators_overwrite_params", "check_estimators_fit_returns_self",
-                       "check_readonly_memmap_input", "check_fit_idempotent",
-                       "check_fit_check_is_fitted", "check_n_features_in")
-_BLOB_CHECKS = ("check_pipeline_consistency", "check_estimators_pickle",
-                "check_transformer_data_not_an_array", "check_transformer_general",
-                "check_transformer_preserve_dtypes")
-
-
-def expected_failed_checks(model: GrassmannStiefelEigenmaps) -> dict[str, str]:
-    """The scikit-learn estimator checks ``model`` cannot pass, each with its reason."""
-    k, q = model.n_neighbors, model.n_components
-    out = {"check_positive_only_tag_during_fit":
-           "the check fits on iris, which has duplicate rows: GSE rejects duplicate samples "
-           "(a zero-distance neighbour leaves the local tangent undefined)"}
-    if k < 15:
-        out |= dict.fromkeys(_BLOB_CHECKS, (
-            f"the check's data are two separated blobs of 15 samples: with n_neighbors={k} "
-            "the neighbour graph is disconnected, and GSE embeds one connected manifold"))
-    else:
-        out |= dict.fromkeys(_BLOB_CHECKS[2:4], (
-            "the check's data are two tight blobs joined by a few kNN links: the out-of-sample "
-            "map (transform) reproduces their least-squares embedding (fit_transform) only to "
-            "~0.05, not to the check's 0.01"))
-    if q >= 2:
-        out |= dict.fromkeys(_CHECK_TWO_FEATURES, (
-            f"n_components={q} needs more than {q} features and the check's data have 2"))
-    for check, n in _CHECK_SIZES.items():
-        if n <= k:
-            out[check] = (f"n_neighbors={k} needs more than {k} samples and the check fits on "
-                          f"{n}; n_neighbors <= {n - 1} passes it")
-    return out
 
 
 class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixin,
@@ -211,7 +177,7 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
     def _expected_failed_checks(self) -> dict[str, str]:
         """scikit-learn estimator checks that cannot apply to this instance, with the reason
         (``parametrize_with_checks(..., expected_failed_checks=...)``)."""
-        return expected_failed_checks(self)
+        return embedding_expected_failed_checks(self)
 
     @property
     def _n_features_out(self) -> int:

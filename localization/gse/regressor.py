@@ -31,6 +31,7 @@ from sklearn.utils.validation import check_is_fitted
 from localization.geometry import wrap_angle
 from localization.gse.alignment import _KERNELS
 from localization.gse.embedding import GrassmannStiefelEigenmaps
+from localization.gse.estimator_checks import regressor_expected_failed_checks
 from localization.gse.graph import (
     Array,
     brute_knn,
@@ -51,36 +52,6 @@ from localization.gse.pose_block import PoseBlockMixin
 from localization.gse.validation import check_2d, validate_X, validate_y
 
 __all__ = ["GSERegressor", "pinv_blocks"]
-
-#: Training-set sizes of scikit-learn's estimator checks that use fewer than 22 samples.
-_CHECK_SIZES = {"check_estimators_nan_inf": 10, "check_fit2d_1feature": 10,
-                "check_regressors_no_decision_function": 10, "check_regressor_multioutput": 11,
-                "check_n_features_in_after_fitting": 15, "check_dont_overwrite_parameters": 20,
-                "check_estimators_dtypes": 20,
-                "check_f_contiguous_array_estimator": 20, "check_dict_unchanged": 20,
-                "check_methods_sample_order_invariance": 20,
-                "check_methods_subset_invariance": 20, "check_fit2d_predict1d": 20,
-                "check_estimators_overwrite_params": 21, "check_estimators_fit_returns_self": 21,
-                "check_readonly_memmap_input": 21}
-
-
-def expected_failed_checks(model: GSERegressor) -> dict[str, str]:
-    """The scikit-learn estimator checks ``model`` cannot pass, each with its reason."""
-    k = model.n_neighbors
-    out = {"check_positive_only_tag_during_fit":
-           "the check fits on iris, which has duplicate rows: GSE rejects duplicate samples "
-           "(a zero-distance neighbour leaves the local tangent undefined)"}
-    if k < 15:
-        out |= dict.fromkeys(("check_pipeline_consistency", "check_estimators_pickle"), (
-            "the check's data are two separated blobs of 15 samples with a constant target "
-            f"on each: with n_neighbors={k} no neighbourhood sees the pose vary (so "
-            "theta_scale='auto' is 0) and the neighbour graph is disconnected"))
-    for check, n in _CHECK_SIZES.items():
-        if n <= k + 1:
-            out[check] = (f"n_neighbors={k} needs more than {k + 1} samples and the check fits "
-                          f"on {n}; n_neighbors <= {n - 2} passes it")
-    return out
-
 
 def _broadcast_scale(theta_scale: object, d: int) -> Array:
     """``theta_scale`` (a number or d numbers) as an array of shape (d,)."""
@@ -246,10 +217,23 @@ class GSERegressor(PoseBlockMixin, RegressorMixin, BaseEstimator):
     def _expected_failed_checks(self) -> dict[str, str]:
         """scikit-learn estimator checks that cannot apply to this instance, with the reason
         (``parametrize_with_checks(..., expected_failed_checks=...)``)."""
-        return expected_failed_checks(self)
+        return regressor_expected_failed_checks(self)
 
     def fit(self, W: Array, y: Array) -> GSERegressor:
-        """Fit on features ``W`` (n, m) and poses ``y`` = Theta, (n, d) or (n,)."""
+        """Fit psi*, Phi* and their Jacobians on features and poses.
+
+        Parameters
+        ----------
+        W : array_like of shape (n, m)
+            Features, one row per sample.
+        y : array_like of shape (n, d) or (n,)
+            Poses Theta (angles of the ``periodic`` columns in radians); a 1-D ``y`` is
+            one pose column, and :meth:`predict` then returns shape (n,).
+
+        Returns
+        -------
+        self
+        """
         self._validate_params()
         W = validate_X(self, W, "W", reset=True)
         Theta, self.y_1d_ = validate_y(self, y, len(W), "y", "W")
