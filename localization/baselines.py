@@ -20,7 +20,8 @@ import json
 import os
 import warnings
 from collections.abc import Sequence
-from typing import Any
+from numbers import Integral, Real
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -28,9 +29,12 @@ from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.metrics.pairwise import euclidean_distances
 from sklearn.model_selection import GridSearchCV, KFold
 from sklearn.neighbors import KNeighborsRegressor, NearestNeighbors
+from sklearn.utils import Tags
+from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
 from localization.geometry import Array, wrap_angle
+from localization.gse.validation import validate_X, validate_y
 
 __all__ = ["KernelRegressor", "RetrievalRegressor"]
 
@@ -40,21 +44,6 @@ DENSE_LIMIT = 3000
 #: Neighbours kept by the kNN-truncated kernel when ``n_neighbors=None`` and n > DENSE_LIMIT.
 AUTO_NEIGHBORS = 128
 _CHUNK = 2_000_000  # elements per distance block
-
-
-def _check_2d(X: ArrayLike, name: str) -> Array:
-    X = np.asarray(X, dtype=np.float64)
-    if X.ndim == 1:
-        raise ValueError(f"{name} must be 2-D (n_samples, n_features), got a 1-D array of shape "
-                         f"{X.shape}; use {name}.reshape(-1, 1) for one feature or "
-                         f"{name}.reshape(1, -1) for one sample")
-    if X.ndim != 2:
-        raise ValueError(f"{name} must be 2-D (n_samples, n_features), got shape {X.shape}")
-    if X.shape[0] == 0 or X.shape[1] == 0:
-        raise ValueError(f"{name} is empty (shape {X.shape})")
-    if not np.all(np.isfinite(X)):
-        raise ValueError(f"{name} contains NaN or inf")
-    return X
 
 
 def _jsonable(v: Any) -> Any:
@@ -67,38 +56,31 @@ def _jsonable(v: Any) -> Any:
     return v
 
 
-class _PoseRegressorBase(BaseEstimator, RegressorMixin):
+class _PoseRegressorBase(RegressorMixin, BaseEstimator):
     """Shared input checks, periodic output encoding and npz persistence."""
 
     _fitted_scalars: tuple[str, ...] = ()
 
+    def __sklearn_tags__(self) -> Tags:
+        tags = super().__sklearn_tags__()
+        tags.target_tags.multi_output = True
+        return tags
+
     # -- validation / encoding ------------------------------------------------------
     def _validate_fit(self, X: ArrayLike, Y: ArrayLike) -> tuple[Array, Array]:
-        X = _check_2d(X, "X")
-        Y = np.asarray(Y, dtype=np.float64)
-        self.y_1d_ = Y.ndim == 1
-        Y = _check_2d(Y[:, None] if Y.ndim == 1 else Y, "Y")
-        if X.shape[0] != Y.shape[0]:
-            raise ValueError(f"X and Y have different numbers of samples: {X.shape[0]} vs "
-                             f"{Y.shape[0]}")
-        if X.shape[0] < 2:
-            raise ValueError("need at least 2 training samples")
+        X = validate_X(self, X, "X", reset=True, ensure_min_samples=2)
+        Y, self.y_1d_ = validate_y(self, Y, len(X), "Y", "X")
         d = Y.shape[1]
         per = [int(p) for p in self.periodic]
         if any(not 0 <= p < d for p in per) or len(set(per)) != len(per):
             raise ValueError(f"periodic={tuple(self.periodic)} invalid for Y with {d} columns")
         self.periodic_ = tuple(sorted(per))
-        self.n_features_in_ = X.shape[1]
         self.n_outputs_ = d
         return X, Y
 
     def _validate_predict(self, X: ArrayLike) -> Array:
         check_is_fitted(self, "X_train_")
-        X = _check_2d(X, "X")
-        if X.shape[1] != self.n_features_in_:
-            raise ValueError(f"X has {X.shape[1]} features, the model was fitted with "
-                             f"{self.n_features_in_}")
-        return X
+        return validate_X(self, X, "X", reset=False)
 
     def _encode(self, Y: Array) -> Array:
         """(n, d) -> (n, d + len(periodic)): angle columns become cos, sin (appended)."""
@@ -199,6 +181,13 @@ class KernelRegressor(_PoseRegressorBase):
     """
 
     _fitted_scalars = ("bandwidth_", "n_neighbors_", "bandwidth_grid_", "loo_errors_")
+    _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
+        "bandwidth": [StrOptions({"loo"}), Interval(Real, 0, None, closed="neither")],
+        "bandwidth_grid": ["array-like", None],
+        "n_neighbors": [Interval(Integral, 1, None, closed="left"), None],
+        "periodic": ["array-like"],
+        "standardize": ["boolean"],
+    }
 
     def __init__(self, bandwidth: str | float = "loo", bandwidth_grid: ArrayLike | None = None,
                  n_neighbors: int | None = None, periodic: Sequence[int] = (),
@@ -222,6 +211,7 @@ class KernelRegressor(_PoseRegressorBase):
         -------
         self
         """
+        self._validate_params()
         X, Y = self._validate_fit(X, Y)
         if isinstance(self.bandwidth, str):
             if self.bandwidth != "loo":
@@ -399,6 +389,16 @@ class RetrievalRegressor(_PoseRegressorBase):
     """
 
     _fitted_scalars = ("n_neighbors_", "cv_k_", "cv_scores_")
+    _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
+        "n_neighbors": [Interval(Integral, 1, None, closed="left"), StrOptions({"cv"})],
+        "weights": [StrOptions({"distance", "uniform"})],
+        "periodic": ["array-like"],
+        "standardize": ["boolean"],
+        "k_grid": ["array-like"],
+        "cv": [Interval(Integral, 2, None, closed="left")],
+        "random_state": ["random_state"],
+        "algorithm": [StrOptions({"auto", "ball_tree", "kd_tree", "brute"})],
+    }
 
     def __init__(self, n_neighbors: int | str = 1, weights: str = "distance",
                  periodic: Sequence[int] = (), standardize: bool = True,
@@ -425,6 +425,7 @@ class RetrievalRegressor(_PoseRegressorBase):
         -------
         self
         """
+        self._validate_params()
         X, Y = self._validate_fit(X, Y)
         if self.weights not in ("distance", "uniform"):
             raise ValueError(f"weights must be 'distance' or 'uniform', got {self.weights!r}")

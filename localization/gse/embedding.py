@@ -11,12 +11,20 @@ Free functions do the maths; :class:`GrassmannStiefelEigenmaps` stores settings.
 from __future__ import annotations
 
 import warnings
+from numbers import Integral, Real
+from typing import Any, ClassVar
 
 import numpy as np
 from scipy import sparse
 from scipy.sparse.linalg import cg
 from scipy.spatial import cKDTree
-from sklearn.base import BaseEstimator
+from sklearn.base import (
+    BaseEstimator,
+    ClassNamePrefixFeaturesOutMixin,
+    TransformerMixin,
+)
+from sklearn.utils import Tags
+from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
 from localization.gse.alignment import (
@@ -26,11 +34,11 @@ from localization.gse.alignment import (
     grassmann_kernel,
     landmark_frames,
 )
+from localization.gse.estimator_checks import embedding_expected_failed_checks
 from localization.gse.graph import (
     _CHUNK,
     Array,
     brute_knn,
-    check_2d,
     check_connected,
     knn_graph,
     local_pca,
@@ -40,6 +48,7 @@ from localization.gse.graph import (
     symmetric_edges,
 )
 from localization.gse.jacobian_regression import jacobian_regression
+from localization.gse.validation import check_2d, validate_X
 
 __all__ = ["GrassmannStiefelEigenmaps", "align_frames", "embed_from_frames", "grassmann_kernel"]
 
@@ -68,7 +77,8 @@ def embed_from_frames(Z: Array, H: Array, ei: Array, ej: Array, K: Array) -> Arr
     return Y - Y.mean(axis=0)
 
 
-class GrassmannStiefelEigenmaps(BaseEstimator):
+class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixin,
+                                BaseEstimator):
     """Grassmann & Stiefel Eigenmaps (tangent-bundle manifold learning).
 
     Parameters
@@ -112,7 +122,22 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
     recovery_bandwidth_ : float
         Bandwidth of the kernel of g, G in y-space (default ``bandwidth_``; see
         :meth:`select_recovery_bandwidth`).
+    n_features_in_ : int
+        Number of columns p of the sample.
     """
+
+    _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
+        "n_components": [Interval(Integral, 1, None, closed="left")],
+        "n_neighbors": [Interval(Integral, 1, None, closed="left")],
+        "bandwidth": [StrOptions({"auto"}), Interval(Real, 0, None, closed="neither")],
+        "grassmann_kernel": [StrOptions(set(_KERNELS))],
+        "grassmann_threshold": [Interval(Real, 0, None, closed="neither"), None],
+        "n_refine": [Interval(Integral, 0, None, closed="left")],
+        "eigen_solver": [StrOptions({"auto", "dense", "lu", "lobpcg"})],
+        "min_kernel_sum": [Interval(Real, 0, None, closed="neither")],
+        "out_of_domain": [StrOptions({"raise", "nan", "ignore"})],
+        "random_state": [Interval(Integral, 0, None, closed="left")],
+    }
 
     def __init__(self, n_components: int = 2, n_neighbors: int = 15,
                  bandwidth: float | str = "auto", grassmann_kernel: str = "binet_cauchy",
@@ -131,22 +156,33 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
         self.random_state = random_state
 
     def _check_params(self, n: int, p: int) -> None:
+        """Checks that depend on the sample (the types and ranges are in
+        ``_parameter_constraints``)."""
         q, k = self.n_components, self.n_neighbors
-        if not (isinstance(q, (int, np.integer)) and 1 <= q < p):
-            raise ValueError(f"n_components={q} must be an integer in [1, ambient dim - 1] = "
-                             f"[1, {p - 1}]")
-        if not (isinstance(k, (int, np.integer)) and k >= q + 1):
-            raise ValueError(f"n_neighbors={k} must be an integer >= n_components + 1 = {q + 1}")
+        if q >= p:
+            raise ValueError(f"n_components={q} must be smaller than the number of features "
+                             f"(n_features={p}): GSE learns a q-dimensional manifold in "
+                             "p-dimensional space")
+        if k < q + 1:
+            raise ValueError(f"n_neighbors={k} must be >= n_components + 1 = {q + 1}")
         if n <= k:
-            raise ValueError(f"need more samples than n_neighbors: n_samples={n}, n_neighbors={k}")
-        if self.grassmann_kernel not in _KERNELS:
-            raise ValueError(f"unknown grassmann_kernel {self.grassmann_kernel!r}; "
-                             f"choose one of {_KERNELS}")
-        if self.out_of_domain not in ("raise", "nan", "ignore"):
-            raise ValueError(f"out_of_domain must be 'raise', 'nan' or 'ignore', got "
-                             f"{self.out_of_domain!r}")
-        if self.eigen_solver not in ("auto", "dense", "lu", "lobpcg"):
-            raise ValueError(f"unknown eigen_solver {self.eigen_solver!r}")
+            raise ValueError(f"need more samples than n_neighbors: n_samples={n}, "
+                             f"n_neighbors={k}")
+
+    def __sklearn_tags__(self) -> Tags:
+        tags = super().__sklearn_tags__()
+        tags.transformer_tags.preserves_dtype = ["float64"]
+        return tags
+
+    def _expected_failed_checks(self) -> dict[str, str]:
+        """scikit-learn estimator checks that cannot apply to this instance, with the reason
+        (``parametrize_with_checks(..., expected_failed_checks=...)``)."""
+        return embedding_expected_failed_checks(self)
+
+    @property
+    def _n_features_out(self) -> int:
+        """Number of output columns of :meth:`transform` (for ``get_feature_names_out``)."""
+        return self.n_components
 
     def fit(self, Z: Array, y: None = None, cut: Array | None = None
             ) -> GrassmannStiefelEigenmaps:
@@ -157,7 +193,8 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
         difference in any of them exceeds pi are removed, so each closed loop is cut
         open at +-pi and the sample is embedded as one chart (docs/method.md §10).
         """
-        Z = check_2d(Z, "Z")
+        self._validate_params()
+        Z = validate_X(self, Z, "Z", reset=True)
         n, p = Z.shape
         self._check_params(n, p)
         q, k = self.n_components, self.n_neighbors
@@ -231,7 +268,7 @@ class GrassmannStiefelEigenmaps(BaseEstimator):
     def transform(self, Z: Array) -> Array:
         """Out-of-sample embedding h(Z) (docs/method.md §7.1), shape (n, q); sample-wise."""
         check_is_fitted(self, "embedding_")
-        Z = check_2d(Z, "Z", self.Z_.shape[1])
+        Z = validate_X(self, Z, "Z", reset=False)
         q, k = self.n_components, self.n_neighbors + 1
         out = np.empty((Z.shape[0], q))
         for s in range(0, Z.shape[0], _CHUNK):

@@ -1,7 +1,8 @@
 """Private numerical helpers shared by GSE and the GSE regressor.
 
 Neighbourhood graphs, batched local PCA, polar factors, brute-force neighbour
-queries and input validation. Everything is vectorised over samples; nothing
+queries (input validation: :mod:`localization.gse.validation`). Everything is
+vectorised over samples; nothing
 here forms an n x n or nq x nq dense matrix.
 """
 
@@ -19,26 +20,6 @@ from sklearn.neighbors import NearestNeighbors
 from localization.geometry import Array
 
 _CHUNK = 1024  # rows per batch in chunked computations (bounds memory)
-
-
-def check_2d(X: object, name: str, n_cols: int | None = None) -> Array:
-    """Validate a finite float64 2-D array (n, n_cols); clear ValueError otherwise."""
-    X = np.asarray(X)
-    if X.dtype.kind not in "biuf":
-        raise ValueError(f"{name} must be numeric, got dtype {X.dtype}")
-    if X.ndim != 2:
-        raise ValueError(f"{name} must be 2-D of shape (n_samples, n_features), got shape {X.shape}"
-                         " (reshape 1-D input with X.reshape(1, -1) for one sample)")
-    if X.shape[0] == 0:
-        raise ValueError(f"{name} has no rows")
-    if n_cols is not None and X.shape[1] != n_cols:
-        raise ValueError(f"{name} has {X.shape[1]} columns, expected {n_cols} (as in fit)")
-    X = np.ascontiguousarray(X, dtype=np.float64)
-    bad = ~np.isfinite(X).all(axis=1)
-    if bad.any():
-        raise ValueError(f"{name} contains NaN or inf in {bad.sum()} row(s), first row "
-                         f"{int(np.flatnonzero(bad)[0])}")
-    return X
 
 
 def polar(M: Array) -> Array:

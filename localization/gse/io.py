@@ -24,7 +24,8 @@ def save_regressor(model: Any, path: str | Path) -> None:
         "bandwidth_w_": model.bandwidth_w_, "bandwidth_theta_": model.bandwidth_theta_,
         "jr_neighbors_": model.jr_neighbors_, "pca_bw": model._pca_bw,
         "gse_bandwidth_": g.bandwidth_, "recovery_bandwidth_": g.recovery_bandwidth_,
-        "n_edges_": g.n_edges_, "agreement_": model.agreement_, "format": 2}
+        "n_edges_": g.n_edges_, "agreement_": model.agreement_,
+        "y_1d": bool(getattr(model, "y_1d_", False)), "format": 2}
     if isinstance(settings["params"]["theta_scale"], np.ndarray):
         settings["params"]["theta_scale"] = settings["params"]["theta_scale"].tolist()
     arrays = {k: getattr(model, k) if hasattr(model, k) else getattr(g, k) for k in _ARRAYS}
@@ -65,6 +66,7 @@ def load_regressor(cls: Any, path: str | Path) -> Any:
         g.recovery_bandwidth_ = float(s["recovery_bandwidth_"])
         g.n_components_graph_ = 1
         model.w_scale_ = float(s["w_scale_"])
+        model.y_1d_ = bool(s.get("y_1d", False))  # absent from older files: 2-D poses
         model.agreement_ = s.get("agreement_")
         model.jr_neighbors_ = int(s["jr_neighbors_"])
         model._pca_bw = float(s["pca_bw"])
@@ -86,6 +88,7 @@ def load_regressor(cls: Any, path: str | Path) -> Any:
     except Exception as exc:  # zipfile, KeyError, JSON, shape errors -> one clear message
         raise ValueError(f"cannot load GSERegressor from {path}: corrupted or incomplete "
                          f"file ({type(exc).__name__}: {exc})") from exc
+    g.n_features_in_, model.n_features_in_ = g.Z_.shape[1], m
     g._setup()
     model.gse_ = g
     model._setup()

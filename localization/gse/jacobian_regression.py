@@ -21,7 +21,8 @@ from numpy.typing import NDArray
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from localization.gse.graph import Array, brute_knn, check_2d, softmax_weights
+from localization.gse.graph import Array, brute_knn, softmax_weights
+from localization.gse.validation import check_2d
 
 BANDWIDTH_GRID = (0.25, 0.35, 0.5, 0.7, 1.0, 1.4, 2.0)
 #: Factors (of the median y-distance to the k-th neighbour) tried by ``agreement="auto"``.

@@ -9,6 +9,8 @@ lift, its inverse and derivative, wrapped pose differences, and the automatic sc
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from localization.geometry import Array, wrap_angle
@@ -82,7 +84,10 @@ class PoseBlockMixin:
         each periodic column alone. The local fit is the minimum-norm least-squares
         solution ignoring pose directions in which the neighbours spread less than 10 %
         of the main one: on a 1-D route through a 2-D position space the lateral
-        direction is not observed, and fitting it would blow one column's scale up."""
+        direction is not observed, and fitting it would blow one column's scale up.
+        A group whose median sensitivity is 0 (poses constant within most neighbourhoods,
+        e.g. class labels as the target) gets 1 / its RMS neighbour difference, with a
+        RuntimeWarning; a column that never varies keeps 0 (fit then raises)."""
         d = Theta.shape[1]
         self.theta_scale_ = np.ones(d)
         dT = self._pose_diff(Theta, Theta[ind_w])
@@ -97,4 +102,12 @@ class PoseBlockMixin:
         scale = np.empty(d)
         for g in groups:
             scale[g] = np.median(np.linalg.norm(Jt[:, g, :], ord=2, axis=(1, 2)))
+            if not scale[g[0]] > 0:  # e.g. a piecewise-constant target: the poses of most
+                # feature-space neighbourhoods do not vary; use the global spread instead
+                spread = float(np.sqrt((dT[..., g] ** 2).sum(axis=2).mean()))
+                scale[g] = 1.0 / spread if spread > 0 else 0.0
+                warnings.warn(f"theta_scale='auto': the poses of columns {g} do not vary "
+                              "within most feature-space neighbourhoods (a piecewise-constant "
+                              "target?); scaling them by their mean neighbour spread instead",
+                              RuntimeWarning, stacklevel=3)
         return scale

@@ -16,19 +16,25 @@ nearest neighbour's side of every cut.
 
 from __future__ import annotations
 
+import warnings
+from numbers import Integral, Real
 from pathlib import Path
+from typing import Any, ClassVar
 
 import numpy as np
 from scipy.spatial import cKDTree
-from sklearn.base import BaseEstimator
+from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.utils import Tags
+from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
 from localization.geometry import wrap_angle
+from localization.gse.alignment import _KERNELS
 from localization.gse.embedding import GrassmannStiefelEigenmaps
+from localization.gse.estimator_checks import regressor_expected_failed_checks
 from localization.gse.graph import (
     Array,
     brute_knn,
-    check_2d,
     cuts_keep_connected,
     knn_graph,
     local_pca,
@@ -43,17 +49,33 @@ from localization.gse.jacobian_regression import (
     loo_bandwidth,
 )
 from localization.gse.pose_block import PoseBlockMixin
+from localization.gse.validation import check_2d, validate_X, validate_y
 
 __all__ = ["GSERegressor", "pinv_blocks"]
+
+def _broadcast_scale(theta_scale: object, d: int) -> Array:
+    """``theta_scale`` (a number or d numbers) as an array of shape (d,)."""
+    scale = np.asarray(theta_scale, dtype=float)
+    if scale.ndim > 1 or scale.size not in (1, d):
+        raise ValueError(f"theta_scale must be 'auto', a number or {d} numbers (one per pose "
+                         f"column), got shape {scale.shape}")
+    return np.broadcast_to(scale.ravel() if scale.ndim else scale, (d,)).copy()
 
 
 def pinv_blocks(H: Array, ridge: float = 0.0) -> Array:
     """``(H^T H + ridge I)^{-1} H^T`` for a batch (n, a, b) -> (n, b, a), by q x q solves."""
     HtH = np.swapaxes(H, 1, 2) @ H + ridge * np.eye(H.shape[2])
-    return np.linalg.solve(HtH, np.swapaxes(H, 1, 2))
+    try:
+        return np.linalg.solve(HtH, np.swapaxes(H, 1, 2))
+    except np.linalg.LinAlgError:  # an exactly rank-deficient block (only with ridge=0)
+        warnings.warn("a block of the GSE frames is rank-deficient (the poses or features do "
+                      "not vary along the fitted manifold at some samples); using the "
+                      "minimum-norm pseudo-inverse there: pass ridge > 0 to regularise",
+                      RuntimeWarning, stacklevel=3)
+        return np.linalg.pinv(H)
 
 
-class GSERegressor(PoseBlockMixin, BaseEstimator):
+class GSERegressor(PoseBlockMixin, RegressorMixin, BaseEstimator):
     """GSE regression between features w (n, m) and poses theta (n, d).
 
     Parameters
@@ -129,7 +151,32 @@ class GSERegressor(PoseBlockMixin, BaseEstimator):
         Angle along the detected position loop (None: no loop, or loop_cut="none").
     cut_ : ndarray of shape (n, c) or None
         All cut coordinates (periodic columns, then the loop angle).
+    n_features_in_ : int
+        Number of feature columns m.
+    y_1d_ : bool
+        Whether the poses were given as a 1-D array (:meth:`predict` then returns one too).
     """
+
+    _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
+        "n_components": [Interval(Integral, 1, None, closed="left"), None],
+        "n_neighbors": [Interval(Integral, 1, None, closed="left")],
+        "periodic": ["array-like"],
+        "theta_scale": [StrOptions({"auto"}), Interval(Real, 0, None, closed="neither"),
+                        "array-like"],
+        "bandwidth": [StrOptions({"auto"}), Interval(Real, 0, None, closed="neither")],
+        "grassmann_kernel": [StrOptions(set(_KERNELS))],
+        "project_features": ["boolean"],
+        "ridge": [Interval(Real, 0, None, closed="left")],
+        "bandwidth_grid": ["array-like"],
+        "out_of_domain": [StrOptions({"raise", "nan", "ignore"})],
+        "random_state": [Interval(Integral, 0, None, closed="left")],
+        "theta_scale_factor": [Interval(Real, 0, None, closed="neither")],
+        "jr_neighbors": [Interval(Integral, 1, None, closed="left"), None],
+        "kernel_grassmann": ["boolean"],
+        "loop_cut": [StrOptions({"auto", "none"})],
+        "adaptive_bandwidth": ["boolean"],
+        "agreement": [None, StrOptions({"auto"}), Interval(Real, 0, None, closed="neither")],
+    }
 
     def __init__(self, n_components: int | None = None, n_neighbors: int = 20,
                  periodic: tuple[int, ...] = (), theta_scale: float | str | Array = "auto",
@@ -159,23 +206,47 @@ class GSERegressor(PoseBlockMixin, BaseEstimator):
         self.agreement = agreement
 
     # --------------------------------------------------------------------- fit
-    def fit(self, W: Array, Theta: Array) -> GSERegressor:
-        """Fit on features ``W`` (n, m) and poses ``Theta`` (n, d)."""
-        W, Theta = check_2d(W, "W"), check_2d(Theta, "Theta")
-        if W.shape[0] != Theta.shape[0]:
-            raise ValueError(f"W has {W.shape[0]} rows but Theta has {Theta.shape[0]}")
+    def __sklearn_tags__(self) -> Tags:
+        tags = super().__sklearn_tags__()
+        tags.target_tags.multi_output = True
+        # GSE assumes the features are a smooth function of the pose (a d-dimensional
+        # manifold); scikit-learn's regression data set has 9 of 10 features pure noise
+        tags.regressor_tags.poor_score = True
+        return tags
+
+    def _expected_failed_checks(self) -> dict[str, str]:
+        """scikit-learn estimator checks that cannot apply to this instance, with the reason
+        (``parametrize_with_checks(..., expected_failed_checks=...)``)."""
+        return regressor_expected_failed_checks(self)
+
+    def fit(self, W: Array, y: Array) -> GSERegressor:
+        """Fit psi*, Phi* and their Jacobians on features and poses.
+
+        Parameters
+        ----------
+        W : array_like of shape (n, m)
+            Features, one row per sample.
+        y : array_like of shape (n, d) or (n,)
+            Poses Theta (angles of the ``periodic`` columns in radians); a 1-D ``y`` is
+            one pose column, and :meth:`predict` then returns shape (n,).
+
+        Returns
+        -------
+        self
+        """
+        self._validate_params()
+        W = validate_X(self, W, "W", reset=True)
+        Theta, self.y_1d_ = validate_y(self, y, len(W), "y", "W")
         (n, m), d = W.shape, Theta.shape[1]
         self._per = self._periodic(d)
-        if self.loop_cut not in ("auto", "none"):
-            raise ValueError(f"loop_cut must be 'auto' or 'none', got {self.loop_cut!r}")
-        if not (self.agreement in (None, "auto") or (
-                isinstance(self.agreement, (int, float)) and self.agreement > 0)):
-            raise ValueError(f"agreement must be None, 'auto' or a positive number, got "
-                             f"{self.agreement!r}")
         q = d if self.n_components is None else self.n_components
+        if q > d:
+            raise ValueError(f"n_components={q} must be at most the number of pose columns "
+                             f"of y ({d}): the representation is a chart of the poses")
         k = self.n_neighbors
         if n <= k + 1:
-            raise ValueError(f"need more samples than n_neighbors + 1: n={n}, n_neighbors={k}")
+            raise ValueError(f"need more samples than n_neighbors + 1: n_samples={n}, "
+                             f"n_neighbors={k}")
         Theta = Theta.copy()
         for c in self._per:
             Theta[:, c] = wrap_angle(Theta[:, c])
@@ -187,15 +258,14 @@ class GSERegressor(PoseBlockMixin, BaseEstimator):
         self.theta_center_ = np.where(np.isin(np.arange(d), self._per), 0.0, Theta.mean(axis=0))
         dist_w, ind_w = knn_graph(Ws, k)
         if isinstance(self.theta_scale, str):
-            if self.theta_scale != "auto":
-                raise ValueError(f"theta_scale must be 'auto' or numbers, got {self.theta_scale!r}")
             self.theta_scale_ = self.theta_scale_factor * self._auto_scale(Ws, Theta, ind_w)
         else:
-            self.theta_scale_ = np.broadcast_to(np.asarray(self.theta_scale, float), (d,)).copy()
+            self.theta_scale_ = _broadcast_scale(self.theta_scale, d)
         if not np.all(self.theta_scale_ > 0):
             raise ValueError(f"theta_scale must be positive, got {self.theta_scale_}: with "
-                             "theta_scale='auto' a zero means the features do not vary with "
-                             "that Theta column (drop it or pass theta_scale explicitly)")
+                             "theta_scale='auto' a zero means that y column never varies "
+                             "within a feature-space neighbourhood (constant, or constant per "
+                             "cluster of features): drop it or pass theta_scale explicitly")
         self.theta_ = Theta
         lin = [c for c in range(d) if c not in self._per]
         self.loop_angle_ = (loop_coordinate(Theta[:, lin], k, seed=self.random_state)
@@ -276,9 +346,13 @@ class GSERegressor(PoseBlockMixin, BaseEstimator):
         self.embedding_ = self.gse_.embedding_
 
     # ----------------------------------------------------------------- predict
-    def _check(self, X: Array, name: str, n_cols: str) -> Array:
+    def _check_w(self, W: Array) -> Array:
         check_is_fitted(self, "gse_")
-        return check_2d(X, name, len(getattr(self, n_cols)))
+        return validate_X(self, W, "W", reset=False)
+
+    def _check_theta(self, Theta: Array) -> Array:
+        check_is_fitted(self, "gse_")
+        return check_2d(Theta, "Theta", len(self.theta_scale_))
 
     def _flag(self, log_sum: Array, what: str, *outs: Array) -> None:
         bad = log_sum < np.log(self.gse_.min_kernel_sum)
@@ -307,7 +381,7 @@ class GSERegressor(PoseBlockMixin, BaseEstimator):
             return np.log(np.linalg.det(S) ** 2)
 
     def _r_star(self, W: Array, jacobian: bool) -> tuple[Array, Array | None]:
-        W = self._check(W, "W", "w_mean_")
+        W = self._check_w(W)
         Ws = (W - self.w_mean_) / self.w_scale_
         if len(Ws) <= 32:  # single queries: a KD-tree beats a GEMM over all samples
             ind = np.asarray(self._ws_tree.query(Ws, k=self.jr_neighbors_)[1]).reshape(len(Ws), -1)
@@ -324,7 +398,7 @@ class GSERegressor(PoseBlockMixin, BaseEstimator):
         return r, J
 
     def _R_star(self, Theta: Array, jacobian: bool) -> tuple[Array, Array | None]:
-        Theta = self._check(Theta, "Theta", "theta_scale_").copy()
+        Theta = self._check_theta(Theta).copy()
         for c in self._per:
             Theta[:, c] = wrap_angle(Theta[:, c])
         _, ind = self._zv_tree.query(self._lift(Theta), k=self.jr_neighbors_)
@@ -373,10 +447,12 @@ class GSERegressor(PoseBlockMixin, BaseEstimator):
         return g, J
 
     def predict(self, W: Array) -> Array:
-        """psi*(w) = g_v(r*(w)): poses (n, d), angles wrapped to (-pi, pi]."""
+        """psi*(w) = g_v(r*(w)): poses (n, d) (or (n,) if fitted on a 1-D y), angles
+        wrapped to (-pi, pi]."""
         r, _ = self._r_star(W, False)
         zv, _ = self._recover(r, slice(len(self.w_mean_), None))
-        return self._unlift(zv)
+        theta = self._unlift(zv)
+        return theta[:, 0] if getattr(self, "y_1d_", False) else theta
 
     def predict_features(self, Theta: Array) -> Array:
         """Phi*(theta) = g_u(R*(theta)): features (n, m) in original units."""

@@ -202,7 +202,7 @@ def test_bad_inputs():
     with pytest.raises(ValueError, match="rows"):
         model.fit(W, T[:-1])
     with pytest.raises(ValueError, match="2-D"):
-        model.fit(W, T[:, 0])
+        model.fit(W, T[:, :, None])
     Wn = W.copy()
     Wn[4, 2] = np.inf
     with pytest.raises(ValueError, match="NaN or inf"):
