@@ -1,0 +1,434 @@
+"""ParticleBelief: a multi-hypothesis pose belief from appearance (Monte Carlo localization).
+
+No Gym inside, like :class:`~localization.filtering.belief.BeliefFilter`, with the same
+localizer (:class:`~localization.localizer.AppearanceLocalizer`). N particles ``X_i`` with
+log-weights ``l_i``; with the names of the code::
+
+    predict:  X_i = F(X_i, k U) + T(yaw_i) e_i,   e_i ~ N(0, Q),  Q = diag(sqrt a) Q_body diag(sqrt a)
+    weight:   l_i = l_i + log L_i,   l = l - logsumexp(l)           (weights w_i = exp(l_i))
+              log L_i = -0.5 min(d2_i, gate),   gate = chi2.ppf(gate_probability, dof)
+    AMCL:     w_avg = sum_i w_i L_i / sum_i w_i  (i over the particles not injected last step)
+              w_slow += alpha_slow (w_avg - w_slow),  w_fast += alpha_fast (w_avg - w_fast)
+              inject p = min(max_injection, max(0, 1 - w_fast / (injection_ratio w_slow)))
+              of the particles at the image's proposals
+    resample: when ESS = 1 / sum w_i^2 < resample_threshold N, or particles are injected
+
+(k the localizer's ``control_gain_``, a its calibrated ``consistency(measurement)``).
+``injection_ratio = 1`` is Thrun et al.'s Augmented MCL (Probabilistic Robotics, table
+8.3); the default 0.7 leaves the ordinary ups and downs of the likelihood alone (w_fast /
+w_slow wanders in 0.8-1.2 while tracking), and leaving the fresh particles out of w_avg
+keeps injected particles from lowering it and calling for more injections.
+The squared Mahalanobis distance ``d2_i`` of the measurement at particle ``X_i`` follows
+the localizer's three measurement models (R as in ``localizer.measurement_model``):
+
+- "representation": ``e_i = H_i^-1 (r*(w) - R*(theta_i))``, ``H_i = dR*/dtheta`` at
+  ``theta_i``, ``d2_i = e_b^T R^-1 e_b`` with ``e_b = T(yaw_i)^T e_i`` and R the body-frame
+  pose noise of the model: the same as ``y^T (H T R T^T H^T)^-1 y`` (R* and H of all
+  particles in one batched query; the Jacobian determinant is left out: a near-singular
+  H would otherwise lift far particles above the truth);
+- "pose": ``e_b = T(yaw_i)^T wrap(psi*(w) - theta_i)``, ``d2_i = e_b^T R^-1 e_b``;
+- "features": ``d2_i = (w - Phi*(theta_i))^T R^-1 (w - Phi*(theta_i))``.
+
+Outliers are capped at the gate (an aliased image moves every weight alike) and particles
+where the GSE maps are undefined (NaN: out of the training domain) get that floor, never
+NaN. Proposals of an image (Augmented MCL's injections, the start): psi*(w) and the
+training poses of the ``n_neighbors`` nearest training images in feature space, jittered by
+``proposal_noise`` (body frame). ``pose_mean`` / ``pose_cov`` describe the heaviest mode
+(:mod:`localization.filtering._modes`), never the average of distant modes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from filterpy.monte_carlo import systematic_resample
+from numpy.typing import ArrayLike
+from scipy.special import logsumexp
+from scipy.stats import chi2
+from sklearn.exceptions import NotFittedError
+from sklearn.neighbors import NearestNeighbors
+
+from localization.filtering._modes import Mode, find_modes
+from localization.filtering.measurement_noise import inflate
+from localization.filtering.particle_motion import (
+    is_unicycle,
+    predict_particles,
+    sample_body_noise,
+)
+from localization.geometry import Array, to_body, wrap_angle
+
+__all__ = ["PARTICLE_STATUSES", "ParticleBelief"]
+
+MEASUREMENTS = ("pose", "features", "representation")
+RESET_MODES = ("image", "global")
+#: "initial" after reset; "out_of_domain": the image has no measurement (weights kept);
+#: "lost": w_fast < lost_ratio w_slow (the images are far less likely than usual);
+#: "relocalizing": particles injected this step; "ambiguous": the dominant mode holds less
+#: than ``confident_weight``; "tracking": otherwise.
+PARTICLE_STATUSES = ("initial", "tracking", "ambiguous", "relocalizing", "lost", "out_of_domain")
+SampleFree = Callable[[int, np.random.Generator], ArrayLike]
+
+
+def _fraction(name: str, value: float, low_open: bool = False) -> float:
+    v = float(value)
+    if not (0.0 < v <= 1.0 if low_open else 0.0 <= v <= 1.0):
+        raise ValueError(f"{name} must be in {'(0' if low_open else '[0'}, 1], got {value}")
+    return v
+
+
+class ParticleBelief:
+    """Particle-filter pose belief fed with image features (see the module docstring).
+
+    Parameters
+    ----------
+    localizer : AppearanceLocalizer
+        Fitted, with its noise model (``fit_noise`` or ``fit_process_noise``).
+    motion_model : object
+        F: ``predict(x, u)`` (the env's ``motion_model``); vectorised when it is a unicycle.
+    measurement : {"representation", "pose", "features"}
+    n_particles : int
+    resample_threshold : float in (0, 1]
+        Resample when ESS < resample_threshold * n_particles.
+    resample : callable
+        ``filterpy.monte_carlo`` scheme, weights (N,) -> indexes (N,).
+    gate_probability : float in (0, 1)
+        Squared distances are capped at ``chi2.ppf(gate_probability, dof)``.
+    alpha : array_like (3,), optional
+        Body-frame inflation of Q and R; default ``localizer.consistency(measurement)``.
+    alpha_slow, alpha_fast : float
+        Augmented MCL's averaging rates, ``0 < alpha_slow < alpha_fast <= 1``.
+    injection_ratio : float in (0, 1]
+        Inject once w_fast falls below injection_ratio * w_slow (1: Thrun's rule).
+    max_injection : float in [0, 1]
+        Cap of the injected fraction per step (0: never inject).
+    n_neighbors : int
+        Training images retrieved as proposals.
+    proposal_noise : array_like (3, 3), optional
+        Body-frame jitter of the proposals; default the representation model's R.
+    global_proposal_fraction : float in [0, 1]
+        Share of the particles a global start draws from the image's proposals.
+    sample_free : callable, optional
+        ``sample_free(n, rng) -> (n, 3)`` free poses for a global start; default the
+        localizer's training poses (jittered by ``proposal_noise``).
+    lost_ratio, confident_weight : float
+        Status thresholds (see ``PARTICLE_STATUSES``).
+    mode_radius, heading_scale : float
+        Mode kernel (m) and metres per radian (:func:`~localization.filtering._modes.find_modes`).
+    seed : int or None
+        Seeds every draw (numpy Generator); the same seed gives the same run.
+    """
+
+    def __init__(self, localizer: Any, motion_model: Any, measurement: str = "representation",
+                 n_particles: int = 2000, resample_threshold: float = 0.5,
+                 resample: Callable[[Array], ArrayLike] = systematic_resample,
+                 gate_probability: float = 0.997, alpha: ArrayLike | None = None,
+                 alpha_slow: float = 0.01, alpha_fast: float = 0.2, injection_ratio: float = 0.7,
+                 max_injection: float = 0.5,
+                 n_neighbors: int = 10, proposal_noise: ArrayLike | None = None,
+                 global_proposal_fraction: float = 0.2, sample_free: SampleFree | None = None,
+                 lost_ratio: float = 0.2, confident_weight: float = 0.8,
+                 mode_radius: float = 1.0, heading_scale: float = 2.0,
+                 seed: int | None = None) -> None:
+        if measurement not in MEASUREMENTS:
+            raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
+        if isinstance(n_particles, bool) or int(n_particles) != n_particles or n_particles < 1:
+            raise ValueError(f"n_particles must be a positive integer, got {n_particles}")
+        if not (0.0 < alpha_slow < alpha_fast <= 1.0):
+            raise ValueError(f"need 0 < alpha_slow < alpha_fast <= 1, got {alpha_slow}, "
+                             f"{alpha_fast}")
+        if not 0.0 < gate_probability < 1.0:
+            raise ValueError(f"gate_probability must be in (0, 1), got {gate_probability}")
+        if int(n_neighbors) < 1:
+            raise ValueError(f"n_neighbors must be >= 1, got {n_neighbors}")
+        if sample_free is not None and not callable(sample_free):
+            raise TypeError(f"sample_free must be callable (n, rng) -> (n, 3), got {sample_free!r}")
+        if not callable(resample):
+            raise TypeError(f"resample must be callable weights -> indexes, got {resample!r}")
+        if getattr(localizer, "process_noise_body_", None) is None:
+            raise NotFittedError("the localizer has no process noise: call fit_noise() or "
+                                 "fit_process_noise() first")
+        localizer.measurement_model(measurement)  # raises NotFittedError without R
+        self.localizer, self.motion_model, self.measurement = localizer, motion_model, measurement
+        self.n_particles = int(n_particles)
+        self.resample_threshold = _fraction("resample_threshold", resample_threshold, True)
+        self.max_injection = _fraction("max_injection", max_injection)
+        self.injection_ratio = _fraction("injection_ratio", injection_ratio, True)
+        self.global_proposal_fraction = _fraction("global_proposal_fraction",
+                                                  global_proposal_fraction)
+        self.lost_ratio = _fraction("lost_ratio", lost_ratio)
+        self.confident_weight = _fraction("confident_weight", confident_weight)
+        self.resample, self.sample_free = resample, sample_free
+        self.alpha_slow, self.alpha_fast = float(alpha_slow), float(alpha_fast)
+        self.mode_radius, self.heading_scale = float(mode_radius), float(heading_scale)
+        self.alpha = (localizer.consistency(measurement) if alpha is None
+                      else np.asarray(alpha, dtype=np.float64))
+        if self.alpha.shape != (3,) or not np.all(self.alpha > 0):
+            raise ValueError(f"alpha must be 3 positive numbers, got {alpha}")
+        self.Q = inflate(localizer.process_noise_body_, self.alpha)
+        self.gain = np.asarray(localizer.control_gain_, dtype=np.float64)
+        self._unicycle = is_unicycle(motion_model)
+        reg = localizer.regressor_
+        self._m = len(reg.w_mean_)
+        if measurement == "features":
+            R, dof = localizer.noise_["features"] * float(np.mean(self.alpha)), self._m
+        else:
+            R, dof = inflate(localizer.noise_[measurement], self.alpha), 3
+        self.R, self.gate = R, float(chi2.ppf(gate_probability, dof))
+        self._R_inv = np.linalg.inv(R)
+        self.proposal_noise = np.asarray(localizer.noise_["representation"] if proposal_noise
+                                         is None else proposal_noise, dtype=np.float64)
+        if self.proposal_noise.shape != (3, 3):
+            raise ValueError(f"proposal_noise must be (3, 3), got {self.proposal_noise.shape}")
+        self._train_poses = localizer._from_model(reg.theta_)
+        self._retrieval = NearestNeighbors(n_neighbors=min(int(n_neighbors), len(reg.theta_)))
+        self._retrieval.fit(reg.gse_.Z_[:, :self._m])  # standardised training features
+        self.rng = np.random.default_rng(seed)
+        self.particles: Array | None = None
+        self.log_weights: Array | None = None
+        self.w_slow = self.w_fast = np.nan
+        self.modes: list[Mode] = []
+        self.status = "initial"
+        self.injected = 0
+        self._fresh = np.zeros(0, dtype=bool)  # particles injected at the last step
+
+    # ------------------------------------------------------------------ state
+    @property
+    def weights(self) -> Array:
+        """Normalised weights (N,)."""
+        self._check()
+        return np.exp(self.log_weights)  # type: ignore[arg-type]
+
+    @property
+    def ess(self) -> float:
+        """Effective sample size ``1 / sum w_i^2``."""
+        return float(1.0 / np.sum(self.weights ** 2))
+
+    @property
+    def pose_mean(self) -> Array:
+        """Mean (3,) of the dominant mode."""
+        self._check()
+        return self.modes[0].mean.copy()
+
+    @property
+    def pose_cov(self) -> Array:
+        """Covariance (3, 3) of the dominant mode (heading residuals wrapped)."""
+        self._check()
+        return self.modes[0].cov.copy()
+
+    x, P = pose_mean, pose_cov  # BeliefFilter's names
+
+    @property
+    def hypotheses(self) -> dict[str, Array]:
+        """The modes, heaviest first: "weights" (k,), "means" (k, 3), "covs" (k, 3, 3)."""
+        self._check()
+        return {"weights": np.array([m.weight for m in self.modes]),
+                "means": np.array([m.mean for m in self.modes]),
+                "covs": np.array([m.cov for m in self.modes])}
+
+    def _check(self) -> None:
+        if self.particles is None:
+            raise RuntimeError("the belief is not initialised: call reset() first")
+
+    def _check_w(self, w: ArrayLike) -> Array:
+        w = np.asarray(w, dtype=np.float64)
+        if w.shape != (self._m,):
+            raise ValueError(f"w must be a feature vector of shape ({self._m},), got {w.shape}")
+        if not np.all(np.isfinite(w)):
+            raise ValueError("w (features) contains NaN or inf")
+        return w
+
+    def _set(self, X: Array, log_w: Array | None = None) -> None:
+        self.particles = np.column_stack([X[:, :2], wrap_angle(X[:, 2])])
+        n = len(X)
+        self.log_weights = np.full(n, -np.log(n)) if log_w is None else log_w - logsumexp(log_w)
+        self.modes = find_modes(self.particles, np.exp(self.log_weights), self.mode_radius,
+                                self.heading_scale)
+
+    # --------------------------------------------------------------- proposals
+    def proposals(self, w: ArrayLike) -> Array:
+        """Poses (k, 3) the image suggests: psi*(w) (when in domain), then the training
+        poses of its nearest training images in feature space."""
+        w = self._check_w(w)
+        reg = self.localizer.regressor_
+        ws = ((w - reg.w_mean_) / reg.w_scale_)[None]
+        idx = self._retrieval.kneighbors(ws, return_distance=False)[0]
+        psi = self.localizer.measure(w, "pose")[None]
+        return np.vstack([psi[np.all(np.isfinite(psi), axis=1)], self._train_poses[idx]])
+
+    def _jitter(self, centres: Array, n: int) -> Array:
+        X = centres[self.rng.integers(len(centres), size=n)]
+        return X + sample_body_noise(X[:, 2], self.proposal_noise, self.rng)
+
+    def _free(self, n: int) -> Array:
+        if self.sample_free is None:
+            return self._jitter(self._train_poses, n)
+        X = np.asarray(self.sample_free(n, self.rng), dtype=np.float64)
+        if X.shape != (n, 3) or not np.all(np.isfinite(X)):
+            raise ValueError(f"sample_free must return finite poses of shape ({n}, 3), got "
+                             f"{X.shape}")
+        return X
+
+    # ------------------------------------------------------------------- run
+    def reset(self, w: ArrayLike, mode: str = "image", x0: ArrayLike | None = None,
+              P0: ArrayLike | None = None) -> str:
+        """Start from the first image's features ``w`` (m,).
+
+        ``mode="image"``: every particle from the image's proposals; ``"global"``: a
+        ``global_proposal_fraction`` from them, the rest over the free space
+        (``sample_free``); with ``x0`` (and ``P0``, default small) a Gaussian around x0.
+
+        Returns
+        -------
+        status : "initial"
+        """
+        w = self._check_w(w)
+        if mode not in RESET_MODES:
+            raise ValueError(f"unknown mode {mode!r}; choose one of {RESET_MODES}")
+        N = self.n_particles
+        if x0 is not None:
+            x0 = np.asarray(x0, dtype=np.float64)
+            P0 = np.diag([0.01, 0.01, 0.001]) if P0 is None else np.asarray(P0, float)
+            if x0.shape != (3,) or P0.shape != (3, 3) or not np.all(np.isfinite(x0)):
+                raise ValueError(f"x0 must be a finite (3,) pose and P0 (3, 3), got "
+                                 f"{x0.shape} and {P0.shape}")
+            X = self.rng.multivariate_normal(x0, P0, size=N, method="eigh")
+        elif mode == "image":
+            X = self._jitter(self.proposals(w), N)
+        else:
+            n_prop = round(self.global_proposal_fraction * N)
+            X = np.vstack([self._jitter(self.proposals(w), n_prop), self._free(N - n_prop)])
+        self._set(X)
+        self.w_slow = self.w_fast = np.nan
+        self.status, self.injected = "initial", 0
+        self._fresh = np.zeros(self.n_particles, dtype=bool)
+        return self.status
+
+    def predict(self, u: ArrayLike) -> None:
+        """Move every particle: ``X_i = F(X_i, k U) + T(yaw_i) e_i``, ``e_i ~ N(0, Q)``."""
+        self._check()
+        u = np.asarray(u, dtype=np.float64)
+        if u.shape != (2,) or not np.all(np.isfinite(u)):
+            raise ValueError(f"u (control) must be a finite (2,) [v, w], got {u!r}")
+        X = predict_particles(self.motion_model, self.particles, self.gain * u, self._unicycle)
+        X += sample_body_noise(X[:, 2], self.Q, self.rng)
+        self.particles = np.column_stack([X[:, :2], wrap_angle(X[:, 2])])
+
+    def distances(self, w: ArrayLike, X: ArrayLike | None = None, z: Array | None = None
+                  ) -> Array:
+        """Squared Mahalanobis distances d2 (N,) of the measurement ``z`` of ``w`` (default
+        ``localizer.measure(w, measurement)``) at the particles ``X`` (default the current
+        ones); NaN where the maps are undefined."""
+        w = self._check_w(w)
+        loc, reg = self.localizer, self.localizer.regressor_
+        X = self.particles if X is None else np.asarray(X, dtype=np.float64)
+        z = loc.measure(w, self.measurement) if z is None else z
+        if self.measurement == "features":
+            e = z - reg.predict_features(loc._to_model(X))
+            return np.einsum("ni,ij,nj->n", e, self._R_inv, e)
+        if self.measurement == "pose":
+            e = z[None] - X
+        else:
+            r = z
+            Rstar, H = reg._R_star(loc._to_model(X), True)  # R* and dR*/dtheta in one query
+            e = np.full_like(X, np.nan)
+            ok = np.all(np.isfinite(H), axis=(1, 2)) & np.all(np.isfinite(r))
+            ok[ok] &= np.abs(np.linalg.det(H[ok])) > 1e-12
+            e[ok] = np.linalg.solve(H[ok], (r[None] - Rstar[ok])[..., None])[..., 0]
+        eb = to_body(e, X[:, 2])
+        return np.einsum("ni,ij,nj->n", eb, self._R_inv, eb)
+
+    def step(self, u: ArrayLike, w: ArrayLike) -> tuple[float, str]:
+        """Predict with the commanded control ``u`` (2,), weight with the features ``w``,
+        inject and resample.
+
+        Returns
+        -------
+        likelihood : float
+            ``w_avg``, the weighted mean of the capped likelihoods ``L_i`` (NaN out of domain).
+        status : one of ``PARTICLE_STATUSES`` except "initial"
+        """
+        self._check()
+        w = self._check_w(w)
+        self.predict(u)
+        self.injected = 0
+        z = self.localizer.measure(w, self.measurement)
+        if not np.all(np.isfinite(z)):
+            self._set(self.particles, self.log_weights)
+            self.status = "out_of_domain"
+            return np.nan, self.status
+        log_L = -0.5 * np.minimum(np.nan_to_num(self.distances(w, z=z), nan=np.inf), self.gate)
+        old = self.log_weights[~self._fresh] if (~self._fresh).any() else self.log_weights
+        w_avg = float(np.exp(logsumexp(old + log_L[~self._fresh] if (~self._fresh).any()
+                                       else old + log_L) - logsumexp(old)))
+        self.w_slow = w_avg if np.isnan(self.w_slow) else \
+            self.w_slow + self.alpha_slow * (w_avg - self.w_slow)
+        self.w_fast = w_avg if np.isnan(self.w_fast) else \
+            self.w_fast + self.alpha_fast * (w_avg - self.w_fast)
+        log_w = self.log_weights + log_L
+        log_w -= logsumexp(log_w)
+        p_inject = min(self.max_injection,
+                       max(0.0, 1.0 - self.w_fast / (self.injection_ratio * self.w_slow)))
+        n_inject = int(self.rng.binomial(self.n_particles, p_inject)) if p_inject > 0 else 0
+        if n_inject > 0 or 1.0 / np.sum(np.exp(2 * log_w)) < self.resample_threshold * len(log_w):
+            self._resample(log_w, n_inject, w)
+        else:
+            self._set(self.particles, log_w)
+            self._fresh[:] = False
+        self.injected = n_inject
+        self.status = self._status()
+        return w_avg, self.status
+
+    def _resample(self, log_w: Array, n_inject: int, w: Array) -> None:
+        """Resample by ``self.resample`` and replace ``n_inject`` random particles by
+        proposals of the image. filterpy's schemes draw from numpy's global generator: it
+        is seeded from ``self.rng`` for the call and restored afterwards."""
+        p = np.exp(log_w - logsumexp(log_w))
+        p /= p.sum()
+        state = np.random.get_state()
+        try:
+            np.random.seed(int(self.rng.integers(2 ** 32)))
+            idx = np.asarray(self.resample(p), dtype=np.intp)
+        finally:
+            np.random.set_state(state)
+        idx = np.minimum(idx, len(p) - 1)  # a cumulative sum a hair below 1
+        X = self.particles[idx]
+        self._fresh = np.zeros(len(X), dtype=bool)
+        if n_inject > 0:
+            slots = self.rng.choice(len(X), size=n_inject, replace=False)
+            X[slots] = self._jitter(self.proposals(w), n_inject)
+            self._fresh[slots] = True
+        self._set(X)
+
+    def _status(self) -> str:
+        if self.w_fast < self.lost_ratio * self.w_slow:
+            return "lost"
+        if self.injected > 0:
+            return "relocalizing"
+        if self.modes[0].weight < self.confident_weight:
+            return "ambiguous"
+        return "tracking"
+
+    def run(self, W: ArrayLike, controls: ArrayLike, x0: ArrayLike | None = None,
+            P0: ArrayLike | None = None, mode: str = "image") -> tuple[Array, Array, list[str]]:
+        """Filter a recorded sequence: features ``W`` (n + 1, m) of frames 0..n and the
+        controls (n, 2) between them.
+
+        Returns
+        -------
+        means : (n + 1, 3)  dominant-mode means
+        covs : (n + 1, 3, 3)
+        statuses : list of n + 1 str
+        """
+        W, controls = np.asarray(W, dtype=np.float64), np.asarray(controls, dtype=np.float64)
+        if W.ndim != 2 or controls.shape != (len(W) - 1, 2):
+            raise ValueError(f"need W (n + 1, m) and controls (n, 2), got {W.shape} and "
+                             f"{controls.shape}")
+        statuses = [self.reset(W[0], mode, x0, P0)]
+        means, covs = [self.pose_mean], [self.pose_cov]
+        for u, w in zip(controls, W[1:]):
+            statuses.append(self.step(u, w)[1])
+            means.append(self.pose_mean)
+            covs.append(self.pose_cov)
+        return np.array(means), np.array(covs), statuses

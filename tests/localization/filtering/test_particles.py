@@ -1,0 +1,258 @@
+"""ParticleBelief: vectorised F, log-weights, resampling, modes, recovery, seeds, bad inputs.
+
+The unit tests use the small city-0 localizer of ``tests/localization/conftest.py``; the
+recovery tests fit a street-wide one on city 11 (never used to choose any default).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import envs  # noqa: F401
+from envs.motion_model import UnicycleModel
+from localization.filtering._modes import circular_mean, find_modes
+from localization.filtering.particle_motion import is_unicycle, predict_particles, unicycle_step
+from localization.filtering.particles import ParticleBelief
+from localization.geometry import wrap_angle
+
+from ..conftest import ignore_gse_warnings
+
+DT = 0.1
+
+
+@pytest.fixture(scope="module")
+def features(localizer, drive):
+    images, poses, controls = drive
+    return localizer.transform(images), poses, controls
+
+
+def _belief(localizer, **kw) -> ParticleBelief:
+    return ParticleBelief(localizer, UnicycleModel(DT), **{"n_particles": 500, "seed": 0, **kw})
+
+
+# ---------------------------------------------------------------- motion model
+def test_vectorised_unicycle_equals_F_per_particle():
+    rng = np.random.default_rng(0)
+    X = np.column_stack([rng.uniform(-9, 9, (300, 2)), rng.uniform(-np.pi, np.pi, 300)])
+    U = np.column_stack([rng.uniform(-1, 1, 300), rng.uniform(-1, 1, 300)])
+    U[::7, 1] = 0.0
+    U[1::7, 1] = 3e-7  # the small-w expansion
+    F = UnicycleModel(DT)
+    want = np.array([F.predict(x, u) for x, u in zip(X, U)])
+    got = unicycle_step(X, U, DT)
+    np.testing.assert_allclose(got[:, :2], want[:, :2], atol=1e-12)
+    np.testing.assert_allclose(wrap_angle(got[:, 2] - want[:, 2]), 0.0, atol=1e-12)
+    np.testing.assert_allclose(predict_particles(F, X, U[0]),
+                               [F.predict(x, U[0]) for x in X], atol=1e-12)
+
+
+def test_other_motion_models_are_looped_not_assumed_unicycle():
+    class Skid(UnicycleModel):
+        def predict(self, pose, u):
+            return super().predict(pose, np.asarray(u) * [0.5, 1.0])
+
+    F = Skid(DT)
+    assert is_unicycle(UnicycleModel(DT)) and not is_unicycle(F)
+    X = np.array([[0.0, 0.0, 0.3], [1.0, 2.0, -2.0]])
+    np.testing.assert_allclose(predict_particles(F, X, [0.8, 0.2]),
+                               [F.predict(x, [0.8, 0.2]) for x in X])
+
+
+# ---------------------------------------------------------------- weights
+def test_all_likelihoods_underflowing_give_no_nan(localizer, features):
+    W, poses, _ = features
+    pf = _belief(localizer, max_injection=0.0)
+    pf.reset(W[0], x0=poses[0])
+    far = poses[0] + [40.0, -35.0, 2.0]  # outside the map: R* is NaN there
+    pf.particles = np.tile(far, (pf.n_particles, 1)) + np.random.default_rng(1).normal(
+        0.0, 0.5, (pf.n_particles, 3))
+    assert np.all(np.isnan(pf.distances(W[1])))
+    pf.step([0.0, 0.0], W[1])
+    assert np.all(np.isfinite(pf.log_weights)) and pf.weights.sum() == pytest.approx(1.0)
+    assert np.all(np.isfinite(pf.pose_mean)) and np.all(np.isfinite(pf.pose_cov))
+    # in the map, turned around, with prior weights whose products with the likelihoods
+    # underflow to 0 in linear space (a linear normalisation would give 0 / 0 = NaN)
+    pf.reset(W[0], x0=poses[0])
+    pf.particles = pf.particles + [0.0, 0.0, np.pi]
+    pf.log_weights = np.full(pf.n_particles, -800.0)
+    d2 = pf.distances(W[1])
+    assert np.isfinite(d2).any()
+    assert np.sum(np.exp(pf.log_weights) * np.exp(-0.5 * np.nan_to_num(d2, nan=0.0))) == 0.0
+    pf.step([0.0, 0.0], W[1])
+    assert np.all(np.isfinite(pf.log_weights)) and pf.weights.sum() == pytest.approx(1.0)
+
+
+def test_resampling_fires_when_the_effective_sample_size_drops(localizer, features):
+    W, poses, controls = features
+    calls = []
+
+    def counting(w):
+        from filterpy.monte_carlo import systematic_resample
+        calls.append(len(w))
+        return systematic_resample(w)
+
+    pf = _belief(localizer, resample=counting, max_injection=0.0)
+    pf.reset(W[0], x0=poses[0])
+    half = pf.n_particles // 2
+    pf.particles[:half] += [3.0, 0.0, 0.0]  # half the particles 3 m off
+    pf.step(controls[0], W[1])
+    assert calls == [pf.n_particles]  # the far half lost its weight: ESS < N / 2
+    assert np.allclose(pf.weights, 1.0 / pf.n_particles)
+    assert np.hypot(*(pf.pose_mean[:2] - poses[1][:2])) < 0.5
+    lazy = _belief(localizer, resample=counting, resample_threshold=1e-6, max_injection=0.0)
+    lazy.reset(W[0], x0=poses[0])
+    lazy.step(controls[0], W[1])
+    assert len(calls) == 1 and lazy.ess < lazy.n_particles  # weighted, not resampled
+
+
+# ---------------------------------------------------------------- modes
+def test_dominant_mode_summary_of_two_modes_is_the_heavier_one(localizer, features):
+    rng = np.random.default_rng(0)
+    a, b = np.array([1.0, 2.0, 0.5]), np.array([7.0, 2.0, 0.5])
+    X = np.vstack([a + rng.normal(0, [0.2, 0.2, 0.05], (700, 3)),
+                   b + rng.normal(0, [0.2, 0.2, 0.05], (300, 3))])
+    modes = find_modes(X, np.ones(len(X)))
+    assert len(modes) >= 2
+    np.testing.assert_allclose(modes[0].mean, a, atol=0.05)
+    np.testing.assert_allclose(modes[1].mean, b, atol=0.05)
+    assert modes[0].weight == pytest.approx(0.7, abs=0.02)
+    assert modes[1].weight == pytest.approx(0.3, abs=0.02)
+    assert np.sqrt(modes[0].cov[0, 0]) < 0.3  # not the spread of both modes (3 m)
+    # through the filter: weights, not counts, decide which mode dominates
+    W = features[0]
+    pf = _belief(localizer, n_particles=len(X))
+    pf.reset(W[0])
+    pf._set(X, np.log(np.where(np.arange(len(X)) < 700, 0.2, 1.0)))
+    np.testing.assert_allclose(pf.pose_mean, b, atol=0.05)
+    hyp = pf.hypotheses
+    assert hyp["weights"][0] > 0.6 and hyp["means"].shape[1] == 3
+
+
+def test_heading_mean_near_pi_is_on_the_circle():
+    rng = np.random.default_rng(0)
+    yaw = wrap_angle(np.pi + rng.normal(0.0, 0.05, 2000))  # half near +pi, half near -pi
+    assert np.abs(wrap_angle(circular_mean(yaw) - np.pi)) < 0.01
+    X = np.column_stack([rng.normal(0, 0.1, 2000), rng.normal(0, 0.1, 2000), yaw])
+    mode = find_modes(X, np.ones(2000))[0]
+    assert mode.weight > 0.99
+    assert np.abs(wrap_angle(mode.mean[2] - np.pi)) < 0.01
+    assert mode.cov[2, 2] == pytest.approx(0.05 ** 2, rel=0.2)
+
+
+# ---------------------------------------------------------------- runs
+def test_same_seed_same_run(localizer, features):
+    W, poses, controls = features
+    a = _belief(localizer, seed=5).run(W[:40], controls[:39], x0=poses[0])
+    b = _belief(localizer, seed=5).run(W[:40], controls[:39], x0=poses[0])
+    c = _belief(localizer, seed=6).run(W[:40], controls[:39], x0=poses[0])
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])
+    assert a[2] == b[2]
+    assert not np.array_equal(a[0], c[0])
+
+
+def test_tracks_the_drive_it_was_fitted_with(localizer, features):
+    """Without injections (the core filter). Measured on these 120 steps: RMSE 0.22 m (the
+    EKF BeliefFilter: 0.14 m); with the default injections 0.56 m, from one transient jump
+    to an aliased proposal (2.6 m) around step 50 (reported in issue 12's work)."""
+    W, poses, controls = features
+    W, poses, controls = W[:121], poses[:121], controls[:120]
+    means, _covs, statuses = _belief(localizer, n_particles=1000, max_injection=0.0).run(
+        W, controls, x0=poses[0])
+    err = np.hypot(*(means[:, :2] - poses[:, :2]).T)
+    assert np.sqrt(np.mean(err ** 2)) < 0.35, err.max()
+    assert set(statuses) <= {"initial", "tracking", "ambiguous", "relocalizing", "lost",
+                             "out_of_domain"}
+
+
+# ---------------------------------------------------------------- bad inputs
+@pytest.mark.parametrize("kwargs, error, match", [
+    ({"n_particles": 0}, ValueError, "n_particles"),
+    ({"n_particles": -5}, ValueError, "n_particles"),
+    ({"n_particles": 2.5}, ValueError, "n_particles"),
+    ({"measurement": "laser"}, ValueError, "measurement"),
+    ({"resample_threshold": 0.0}, ValueError, "resample_threshold"),
+    ({"alpha_slow": 0.5, "alpha_fast": 0.1}, ValueError, "alpha_slow"),
+    ({"max_injection": 1.5}, ValueError, "max_injection"),
+    ({"sample_free": 3}, TypeError, "sample_free"),
+    ({"proposal_noise": np.eye(2)}, ValueError, "proposal_noise"),
+])
+def test_bad_arguments_raise_clear_errors(localizer, kwargs, error, match):
+    with pytest.raises(error, match=match):
+        _belief(localizer, **kwargs)
+
+
+def test_bad_inputs_raise_clear_errors(localizer, features):
+    W, _poses, _ = features
+    pf = _belief(localizer)
+    with pytest.raises(RuntimeError, match="reset"):
+        pf.step([0.1, 0.0], W[1])
+    with pytest.raises(ValueError, match="w "):
+        pf.reset(W[0][:3])
+    with pytest.raises(ValueError, match="mode"):
+        pf.reset(W[0], mode="everywhere")
+    pf.reset(W[0])
+    with pytest.raises(ValueError, match="u "):
+        pf.step([np.nan, 0.0], W[1])
+    with pytest.raises(ValueError, match="u "):
+        pf.step([0.1, 0.0, 0.0], W[1])
+    with pytest.raises(ValueError, match="NaN"):
+        pf.step([0.1, 0.0], np.full_like(W[1], np.nan))
+    bad = _belief(localizer, sample_free=lambda n, rng: np.zeros((n, 2)))
+    with pytest.raises(ValueError, match="sample_free"):
+        bad.reset(W[0], mode="global")
+
+
+# ---------------------------------------------------------------- held-out city
+HELD_OUT = 11  # never used to choose a default
+RECOVERY_BOUND = 30  # steps; measured (20 kidnaps, this localizer): median 6, 18 of 20 <= 30
+
+
+@pytest.fixture(scope="module")
+def held_out():
+    """A street-wide localizer on city 11: 32 x 32 images, 3000 lane images, a 300-step
+    noise drive (about 20 s)."""
+    from localization.workflows.tracking import fit_city_localizer
+    env = gym.make("AppearanceNav-v0", scene_seed=HELD_OUT, image_size=(32, 32),
+                   motion_noise=0.05, max_episode_steps=None)
+    with warnings.catch_warnings():
+        ignore_gse_warnings()
+        loc, _ = fit_city_localizer(env, n_train=3000, lanes="streets", n_drive=300, seed=0,
+                                    localizer_params={"features_params": {"n_components": 16}},
+                                    calibrate_on_belief=False, measurements=("representation",))
+    yield env, loc
+    env.close()
+
+
+def test_kidnapped_robot_is_recovered_on_a_held_out_city(held_out):
+    """Teleported 18 m after 60 steps, the filter not told; the EKF as it is does not
+    recover within the drive (measured), the particle filter within 3 steps (measured)."""
+    from localization.workflows.kidnap_eval import record_kidnap_drive, run_filter, steps_to_recover
+    env, loc = held_out
+    drive = record_kidnap_drive(env, loc, 60, 60, seed=100)
+    assert np.hypot(*(drive.poses[drive.kidnap, :2] - drive.poses[drive.kidnap - 1, :2])) > 5
+    means, _, statuses = run_filter("particles", drive, loc, env.unwrapped.motion_model, seed=100)
+    err = np.hypot(*(means[:, :2] - drive.poses[:, :2]).T)
+    assert err[drive.kidnap] > 5.0  # the kidnap did throw the belief off
+    steps = steps_to_recover(means, drive.poses, drive.kidnap)
+    assert steps is not None and steps <= RECOVERY_BOUND, steps
+    assert {"relocalizing", "lost"} & set(statuses[drive.kidnap:drive.kidnap + 5])
+
+
+def test_global_start_is_localized_on_a_held_out_city(held_out):
+    from localization.workflows.kidnap_eval import (
+        record_kidnap_drive,
+        steps_to_recover,
+        street_sampler,
+    )
+    env, loc = held_out
+    drive = record_kidnap_drive(env, loc, 60, 0, seed=202)
+    pf = ParticleBelief(loc, env.unwrapped.motion_model, seed=202,
+                        sample_free=street_sampler(env.unwrapped.city))
+    means, _, _ = pf.run(drive.W, drive.controls, mode="global")
+    steps = steps_to_recover(means, drive.poses, 0)
+    assert steps is not None and steps <= RECOVERY_BOUND, steps
