@@ -30,6 +30,7 @@ from agents.ppo import PPOAgent
 from agents.scripted import ScriptedAgent
 from agents.sources import POSE_SOURCES, make_pose_env
 from localization.localizer import AppearanceLocalizer
+from localization.workflows.agent_env import AgentEnvSettings
 
 __all__ = ["AGENTS", "EvalConfig", "agents_table", "evaluate_agents"]
 
@@ -38,27 +39,15 @@ AGENTS = ("scripted", "ppo")
 
 
 @dataclass
-class EvalConfig:
+class EvalConfig(AgentEnvSettings):
     """Settings of the evaluation (the options of ``appearance-nav eval``)."""
 
     agents: str = field(default="scripted,ppo", metadata={
         "help": "comma-separated: scripted, ppo"})
     sources: str = field(default=",".join(POSE_SOURCES), metadata={
         "help": "comma-separated pose sources: " + ", ".join(POSE_SOURCES)})
-    localizer: str = field(default="results/localizer.npz", metadata={
-        "help": "fitted AppearanceLocalizer (belief and dead_reckoning)"})
-    measurement: str = field(default="", metadata={
-        "help": "belief measurement model (empty: default)"})
     policies: str = field(default="results/agents", metadata={
         "help": "folder with <source>/policy.pt from appearance-nav train"})
-    scene_seed: int = field(default=0, metadata={"help": "the city"})
-    camera: str = field(default="perspective", metadata={"help": "env camera"})
-    image_size: int = field(default=64, metadata={"help": "side of the square camera image"})
-    motion_noise: float = field(default=0.1, metadata={
-        "help": "actuation noise of the env (the localizer's noise model is fitted at one level)"})
-    start: str = field(default="lane", metadata={
-        "help": "episode starts: 'lane' (on a street, facing along it) or 'random' (any free pose)"})
-    max_episode_steps: int = field(default=400, metadata={"help": "episode truncation"})
     episodes: int = field(default=100, metadata={"help": "episodes per agent and source"})
     seed: int = field(default=2_000_000, metadata={"help": "first reset seed"})
     out: str = field(default="results", metadata={"help": "where agents.md / agents.json go"})

@@ -34,6 +34,7 @@ from agents.ppo import make_ppo, save_policy
 from agents.rewards import StreetProgressReward
 from agents.sources import POSE_SOURCES, make_pose_env
 from localization.localizer import AppearanceLocalizer
+from localization.workflows.agent_env import AgentEnvSettings
 
 __all__ = ["VEC_ENVS", "PolicyCheckpoint", "ProgressBar", "TrainConfig", "make_vec_env",
            "train_agent"]
@@ -42,23 +43,11 @@ VEC_ENVS = ("subproc", "dummy")
 
 
 @dataclass
-class TrainConfig:
+class TrainConfig(AgentEnvSettings):
     """Settings of a training run (the options of ``appearance-nav train``)."""
 
     pose_source: str = field(default="belief", metadata={
         "help": "what the policy navigates on: " + ", ".join(POSE_SOURCES)})
-    localizer: str = field(default="results/localizer.npz", metadata={
-        "help": "fitted AppearanceLocalizer (belief and dead_reckoning; make demo writes it)"})
-    measurement: str = field(default="", metadata={
-        "help": "belief measurement model (empty: BeliefWrapper's default)"})
-    scene_seed: int = field(default=0, metadata={"help": "the city"})
-    camera: str = field(default="perspective", metadata={"help": "env camera"})
-    image_size: int = field(default=64, metadata={"help": "side of the square camera image"})
-    motion_noise: float = field(default=0.1, metadata={
-        "help": "actuation noise of the env (the localizer's noise model is fitted at one level)"})
-    start: str = field(default="lane", metadata={
-        "help": "episode starts: 'lane' (on a street, facing along it) or 'random' (any free pose)"})
-    max_episode_steps: int = field(default=400, metadata={"help": "episode truncation"})
     total_timesteps: int = field(default=300_000, metadata={"help": "PPO environment steps"})
     n_envs: int = field(default=8, metadata={"help": "environments per rollout"})
     vec_env: str = field(default="subproc", metadata={
