@@ -29,7 +29,7 @@ from agents.evaluation import as_records, run_episodes, summarize
 from agents.ppo import PPOAgent
 from agents.scripted import ScriptedAgent
 from agents.sources import POSE_SOURCES, make_pose_env
-from localization.localizer import AppearanceLocalizer
+from localization.localizer import AppearanceLocalizer, city_info
 
 __all__ = ["AGENTS", "EvalConfig", "agents_table", "evaluate_agents"]
 
@@ -62,6 +62,8 @@ class EvalConfig:
     episodes: int = field(default=100, metadata={"help": "episodes per agent and source"})
     seed: int = field(default=2_000_000, metadata={"help": "first reset seed"})
     out: str = field(default="results", metadata={"help": "where agents.md / agents.json go"})
+    allow_other_city: bool = field(default=False, metadata={
+        "help": "run a localizer fitted on another city (refused by default)"})
 
 
 def agents_table(rows: list[dict]) -> str:
@@ -91,6 +93,8 @@ def evaluate_agents(args: EvalConfig) -> list[dict]:
                             image_size=(args.image_size, args.image_size),
                             motion_noise=args.motion_noise,
                             max_episode_steps=args.max_episode_steps, start=args.start)
+        if source == "belief":  # dead reckoning takes only Q from the localizer
+            localizer.check_city(city_info(env), allow_other_city=args.allow_other_city)
         city = env.unwrapped.city
         for name in args.agents.split(","):
             if name == "scripted":
