@@ -8,7 +8,7 @@ The public names, grouped by layer (imports flow one way, top to bottom)::
     gse           GrassmannStiefelEigenmaps, GSERegressor, jacobian_regression
     baselines     KernelRegressor, RetrievalRegressor (+ metrics, model_selection, ...)
     filtering     PoseEKF, BeliefFilter, noise models
-    localizer     AppearanceLocalizer
+    localizer     AppearanceLocalizer, city_info, OtherCityError
     wrappers      BeliefWrapper, OracleWrapper, DeadReckoningWrapper
     workflows     fit_city_localizer, track_route, ... (import the simulator)
 
@@ -46,6 +46,7 @@ _LAZY = {
     "BeliefFilter": "filtering", "chi2_band": "filtering",
     # the localizer and its Gymnasium wrappers
     "AppearanceLocalizer": "localizer", "MEASUREMENTS": "localizer",
+    "OtherCityError": "localizer", "city_info": "localizer",
     "BeliefWrapper": "wrappers", "OracleWrapper": "wrappers",
     "DeadReckoningWrapper": "wrappers",
     # workflows (import the simulator)
@@ -65,6 +66,7 @@ __all__ = [
     "GrassmannStiefelEigenmaps",
     "KernelRegressor",
     "OracleWrapper",
+    "OtherCityError",
     "OutOfDomainError",
     "PixelPCA",
     "PoseEKF",
@@ -75,6 +77,7 @@ __all__ = [
     "angular_rmse",
     "body_to_world",
     "chi2_band",
+    "city_info",
     "cov_to_triu",
     "features_from_state",
     "fit_city_localizer",

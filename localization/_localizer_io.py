@@ -1,7 +1,11 @@
 """Persistence of :class:`~localization.localizer.AppearanceLocalizer` (one npz, no pickles).
 
 Settings go in a JSON string; the feature extractor's state, the GSE regressor (its own npz,
-stored as bytes) and the noise model as named arrays.
+stored as bytes), the noise model and the quality report as named arrays.
+
+Format 3 adds the map (``city_``, ``fingerprint_``) to the settings and ``quality/<key>``
+arrays; format-2 files still load, with an unknown city (``city_ = fingerprint_ = None``)
+and no quality report.
 """
 
 from __future__ import annotations
@@ -14,10 +18,13 @@ from typing import Any
 
 import numpy as np
 
+from localization._localizer_map import check_city_info
 from localization.features import features_from_state
 from localization.gse.regressor import GSERegressor
 
-FORMAT = "appearance-nav-localizer/2"
+FORMAT = "appearance-nav-localizer/3"
+#: older formats :func:`load_localizer` still reads
+LEGACY_FORMATS = ("appearance-nav-localizer/2",)
 _GROUPS = ("noise", "rms", "tau", "consistency")
 _ATTRS = {"noise": "noise_", "rms": "residual_rms_", "tau": "correlation_time_",
           "consistency": "consistency_"}
@@ -30,10 +37,12 @@ def save_localizer(loc: Any, path: str | Path) -> None:
     buf = io.BytesIO()
     loc.regressor_.save(buf)
     settings = {"format": FORMAT, "params": loc.get_params(), "camera": loc.camera_,
-                "image_size": list(loc.image_size_), "yaw_cut_": loc.yaw_cut_}
+                "image_size": list(loc.image_size_), "yaw_cut_": loc.yaw_cut_,
+                "city": getattr(loc, "city_", None), "fingerprint": getattr(loc, "fingerprint_", None)}
     arrays = {f"features/{k}": v for k, v in loc.features_.get_state().items()}
     for group in _GROUPS:
         arrays |= {f"{group}/{k}": v for k, v in getattr(loc, _ATTRS[group]).items()}
+    arrays |= {f"quality/{k}": np.float64(v) for k, v in getattr(loc, "quality_", {}).items()}
     arrays["control_gain"] = loc.control_gain_
     if getattr(loc, "initial_noise_", None) is not None:
         arrays["initial_noise"] = loc.initial_noise_
@@ -59,7 +68,7 @@ def load_localizer(cls: type, path: str | Path) -> Any:
     if not isinstance(settings, dict):
         raise ValueError(f"{path} is not a saved AppearanceLocalizer (settings are not a JSON "  # noqa: TRY004  (a bad file is a bad value)
                          f"object)")
-    if settings.get("format") != FORMAT:
+    if settings.get("format") not in (FORMAT, *LEGACY_FORMATS):
         raise ValueError(f"{path}: unknown format {settings.get('format')!r} (want {FORMAT})")
     try:
         params = dict(settings["params"])
@@ -77,6 +86,12 @@ def load_localizer(cls: type, path: str | Path) -> Any:
         loc.control_gain_ = np.asarray(data["control_gain"], dtype=np.float64)
         loc.process_noise_body_ = data.get("process_noise_body")
         loc.initial_noise_ = data.get("initial_noise")
+        loc.city_ = check_city_info(settings.get("city"), "the file's city")
+        loc.fingerprint_ = settings.get("fingerprint")
+        if loc.fingerprint_ is not None and not isinstance(loc.fingerprint_, str):
+            raise TypeError(f"fingerprint must be a str, got {type(loc.fingerprint_).__name__}")
+        loc.quality_ = {k[len("quality/"):]: float(v) for k, v in data.items()
+                        if k.startswith("quality/")}
     except Exception as err:
         raise ValueError(f"{path}: corrupted or incomplete localizer "
                          f"({type(err).__name__}: {err})") from err

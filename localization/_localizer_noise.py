@@ -78,7 +78,8 @@ class NoiseModelMixin:
         2. R of each model from the residuals of its measurements at the true poses:
            robust covariance, inflated per component by the residuals' correlation time.
 
-        Resets the consistency calibration (:meth:`calibrate`).
+        Resets the consistency calibration (:meth:`calibrate`) and the quality report
+        (``quality_``).
 
         Parameters
         ----------
@@ -96,6 +97,7 @@ class NoiseModelMixin:
         self._set_noise(self._residuals(self.regressor_, self.transform(images), poses),
                         sequence=True)
         self.consistency_ = {}
+        self.quality_ = {}  # it described the previous noise model
         return self
 
     def calibrate(self, motion_model: Any, images: ArrayLike, poses: ArrayLike,
@@ -108,7 +110,8 @@ class NoiseModelMixin:
         matches its errors (:func:`~localization.filtering.measurement_noise.consistency_inflation`);
         sets ``consistency_[measurement]``, starting from its current value (calibrating on a
         true-pose drive first, then on a drive on that calibrated belief, refines it). Steps
-        where the filter is lost (> 1 m off) do not count. Arguments as :meth:`fit_noise`.
+        where the filter is lost (> 1 m off) do not count; resets ``quality_``. Arguments as
+        :meth:`fit_noise`.
         """
         self._check_fitted(noise=True)
         images, poses, controls = self._check_drive(images, poses, controls)
@@ -116,6 +119,7 @@ class NoiseModelMixin:
         self.consistency_.update(calibrate_consistency(
             self, motion_model, W, poses, controls, measurements, gate_probability,
             self.noise_["pose"]))
+        self.quality_ = {}  # it described the previous calibration
         return self
 
     @staticmethod

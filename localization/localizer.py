@@ -45,6 +45,13 @@ from numpy.typing import ArrayLike, NDArray
 from sklearn.exceptions import NotFittedError
 
 from localization._localizer_io import load_localizer, save_localizer
+from localization._localizer_map import (  # noqa: F401  (city_info, OtherCityError: public here)
+    MapMixin,
+    OtherCityError,
+    check_city_info,
+    city_info,
+    images_fingerprint,
+)
 from localization._localizer_noise import MEASUREMENTS, NoiseModelMixin, check_data
 from localization._validation import (
     check_array,
@@ -84,7 +91,7 @@ def sparsest_heading(yaw: ArrayLike, bins: int = _YAW_BINS) -> float:
     return float(0.5 * (edges[i] + edges[i + 1]))
 
 
-class AppearanceLocalizer(NoiseModelMixin):
+class AppearanceLocalizer(NoiseModelMixin, MapMixin):
     """Localize a camera from its images: image rows + features + GSE regression + noise.
 
     Parameters
@@ -130,6 +137,14 @@ class AppearanceLocalizer(NoiseModelMixin):
     process_noise_body_ : ndarray (3, 3) or None
     camera_ : str or None
     image_size_ : (int, int)
+    city_ : dict or None
+        The city of the training images (``city_info(env)``; None: unknown, e.g. recorded
+        data); :meth:`check_city` refuses another one.
+    fingerprint_ : str
+        SHA-256 of a fixed subsample of the training images (:func:`images_fingerprint`).
+    quality_ : dict of str -> float
+        The quality report of :func:`~localization.workflows.tracking.fit_city_localizer`
+        (empty until then; reset by a refit, :meth:`fit_noise` and :meth:`calibrate`).
     """
 
     def __init__(self, features: str = "pixel_pca", features_params: dict | None = None,
@@ -145,8 +160,8 @@ class AppearanceLocalizer(NoiseModelMixin):
         self.random_state = random_state
 
     # ------------------------------------------------------------------ fit
-    def fit(self, images: ArrayLike, poses: ArrayLike, *, camera: str | None = None
-            ) -> AppearanceLocalizer:
+    def fit(self, images: ArrayLike, poses: ArrayLike, *, camera: str | None = None,
+            city: dict[str, Any] | None = None) -> AppearanceLocalizer:
         """Fit features, the GSE regression and (``noise_folds >= 2``) the measurement noise.
 
         Parameters
@@ -156,6 +171,11 @@ class AppearanceLocalizer(NoiseModelMixin):
             True poses [x, y, yaw] where the images were taken.
         camera : str, optional
             Camera name of the env that made the images (the wrapper checks it).
+        city : dict, optional
+            The env's city, ``city_info(env)``: stored as ``city_`` so :meth:`check_city`
+            can refuse another city. With the camera these describe the data, so they are
+            arguments of ``fit`` (like scikit-learn's ``feature_names_in_``, taken from X):
+            a separate setter could pair a city with images of another.
 
         Returns
         -------
@@ -165,12 +185,15 @@ class AppearanceLocalizer(NoiseModelMixin):
         images, poses = check_data(images, poses)
         if camera is not None and not isinstance(camera, str):
             raise TypeError(f"camera must be a camera name (str) or None, got {type(camera).__name__}")
+        city = check_city_info(city)
         self._row_slice(images.shape[1])  # validates rows
         if isinstance(self.yaw_cut, str):
             self.yaw_cut_ = sparsest_heading(poses[:, 2])
         else:
             self.yaw_cut_ = float(wrap_angle(float(self.yaw_cut)))
-        self.camera_ = camera
+        self.camera_, self.city_ = camera, city
+        self.fingerprint_ = images_fingerprint(images)
+        self.quality_: dict[str, float] = {}
         self.image_size_ = (int(images.shape[1]), int(images.shape[2]))
         self.features_ = make_features(self.features, **(self.features_params or {}))
         W = self.features_.fit_transform(self._crop(images), poses)  # only small_cnn uses poses

@@ -22,6 +22,7 @@ LAYERS: list[tuple[str, ...]] = [
      "localization.baselines", "localization.intrinsic_dim", "localization.synthetic"),
     ("localization.filtering",),
     ("localization.localizer", "localization._localizer_io", "localization._localizer_noise",
+     "localization._localizer_map",
      "localization.wrappers"),
     ("agents",),
     ("localization.workflows",),

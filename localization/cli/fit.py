@@ -134,6 +134,10 @@ def fit_city(args: Args, out: Path) -> None:
         env.close()
     print("fitted on city {} ({}): {}".format(
         args.scene_seed, args.camera, ", ".join(f"{k} {v:.1f} s" for k, v in seconds.items())))
+    q = loc.quality_
+    print(f"quality on a held-out drive of {q['steps']:.0f} steps: position RMSE "
+          f"{q['rmse']:.3f} m vs dead reckoning {q['rmse_dead_reckoning']:.3f} m, "
+          f"{q['accepted']:.0%} accepted, mean NEES {q['nees_mean']:.2f}")
     loc.save(out)
 
 

@@ -116,13 +116,15 @@ def body_errors(means: ArrayLike, covs: ArrayLike, poses: ArrayLike) -> tuple[Ar
     return e, T @ covs @ np.swapaxes(T, 1, 2)
 
 
+#: upper bound of :func:`consistency_inflation`'s factors (a factor there: calibration failed)
+MAX_INFLATION = 100.0
 _CLIP = float(chi2.ppf(0.99, 1))
 _CLIPPED_MEAN = float(chi2.cdf(_CLIP, 3) + _CLIP * chi2.sf(_CLIP, 1))  # E min(chi2(1), clip)
 
 
 def consistency_inflation(run: Callable[[Array], tuple[Array, Array]], poses: ArrayLike,
                           iterations: int = 4, burn_in: int = 30, lost: float = 1.0,
-                          max_alpha: float = 100.0, start: ArrayLike | None = None) -> Array:
+                          max_alpha: float = MAX_INFLATION, start: ArrayLike | None = None) -> Array:
     """Per-component covariance inflation ``alpha`` (along, cross, heading) that makes a filter
     consistent on a recorded drive: in the body frame, ``min(e_j^2 / P_jj, c)`` has the mean of
     ``min(chi2(1), c)``, with ``c`` chi2(1)'s 99th percentile (6.63; that mean is 0.98).

@@ -1,7 +1,8 @@
 """Workflows: the jobs built from the toolkit and the simulator (the one layer of
 :mod:`localization` that imports :mod:`envs`).
 
-- fitting a localizer for a city and closed-loop tracking (:mod:`.tracking`), tracking runs
+- fitting a localizer for a city and closed-loop tracking (:mod:`.tracking`), its quality
+  report (:mod:`.quality`), tracking runs
   over models and starts with their report (:mod:`.track_runs`);
 - the demo pipeline (:mod:`.demo`), collecting a dataset to a file (:mod:`.collect`);
 - training PPO navigators (:mod:`.training`) and evaluating navigators (:mod:`.navigation`);
@@ -30,6 +31,12 @@ _LAZY = {
     "track_metrics": "tracking",
     "track_route": "tracking",
     "track_streets": "tracking",
+    "city_info": "tracking",
+    "LocalizerQualityWarning": "quality",
+    "quality_problems": "quality",
+    "quality_report": "quality",
+    "quality_table": "quality",
+    "warn_quality": "quality",
     "GSE_GRID": "experiment",
     "MethodResult": "experiment",
     "evaluate_methods": "experiment",
@@ -89,6 +96,7 @@ __all__ = [
     "CollectConfig",
     "DemoConfig",
     "EvalConfig",
+    "LocalizerQualityWarning",
     "MethodResult",
     "PaperConfig",
     "SmallCNNTrainConfig",
@@ -97,6 +105,7 @@ __all__ = [
     "TrainConfig",
     "agents_table",
     "benchmark",
+    "city_info",
     "collect_out_path",
     "collect_to_file",
     "covariance_ellipse",
@@ -116,6 +125,9 @@ __all__ = [
     "plot_route",
     "plot_track",
     "position_errors",
+    "quality_problems",
+    "quality_report",
+    "quality_table",
     "run_demo",
     "run_paper",
     "run_tracking",
@@ -127,6 +139,7 @@ __all__ = [
     "track_streets",
     "train_agent",
     "train_small_cnn_job",
+    "warn_quality",
 ]
 
 __getattr__, __dir__ = lazy_names(__name__, _LAZY, globals())

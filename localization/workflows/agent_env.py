@@ -24,3 +24,5 @@ class AgentEnvSettings:
     start: str = field(default="lane", metadata={
         "help": "episode starts: 'lane' (on a street, facing along it) or 'random' (any free pose)"})
     max_episode_steps: int = field(default=400, metadata={"help": "episode truncation"})
+    allow_other_city: bool = field(default=False, metadata={
+        "help": "run a localizer fitted on another city (refused by default)"})

@@ -39,6 +39,7 @@ import gymnasium as gym
 from localization.localizer import MEASUREMENTS
 from localization.workflows.navigation import EvalConfig, evaluate_agents
 from localization.workflows.plotting import plot_route, plot_track
+from localization.workflows.quality import quality_table
 from localization.workflows.tracking import fit_city_localizer, track_metrics, track_route
 
 __all__ = ["DemoConfig", "demo_table", "run_demo"]
@@ -114,6 +115,8 @@ def run_demo(args: DemoConfig) -> dict:
     print(f"[demo] localizer: {args.n_train} images ({args.lanes} lanes) collected in "
           f"{fit_seconds['collect']:.0f} s, fitted in {fit_seconds['fit']:.0f} s, noise model "
           f"in {fit_seconds['noise']:.0f} s", flush=True)
+    print(f"[demo] localizer quality (held-out drive, {loc.quality_['steps']:.0f} steps):\n"
+          f"{quality_table(loc.quality_)}", flush=True)
     t1 = time.perf_counter()
     rows = []
     for name in MEASUREMENTS:
@@ -140,6 +143,7 @@ def run_demo(args: DemoConfig) -> dict:
                "navigation": navigation,
                "control_gain": loc.control_gain_.tolist(),
                "consistency": {k: v.tolist() for k, v in loc.consistency_.items()},
+               "quality": loc.quality_,
                "seconds": {k: round(v, 1) for k, v in seconds.items()}}
     (out / "demo.json").write_text(json.dumps(summary, indent=2))
     print(f"\nClosed-loop tracking, city {args.scene_seed}, {args.steps} steps along the route "

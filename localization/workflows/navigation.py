@@ -29,7 +29,7 @@ from agents.evaluation import as_records, run_episodes, summarize
 from agents.ppo import PPOAgent
 from agents.scripted import ScriptedAgent
 from agents.sources import POSE_SOURCES, make_pose_env
-from localization.localizer import AppearanceLocalizer
+from localization.localizer import AppearanceLocalizer, city_info
 from localization.workflows.agent_env import AgentEnvSettings
 
 __all__ = ["AGENTS", "EvalConfig", "agents_table", "evaluate_agents"]
@@ -80,6 +80,8 @@ def evaluate_agents(args: EvalConfig) -> list[dict]:
                             image_size=(args.image_size, args.image_size),
                             motion_noise=args.motion_noise,
                             max_episode_steps=args.max_episode_steps, start=args.start)
+        if source == "belief":  # dead reckoning takes only Q from the localizer
+            localizer.check_city(city_info(env), allow_other_city=args.allow_other_city)
         city = env.unwrapped.city
         for name in args.agents.split(","):
             if name == "scripted":

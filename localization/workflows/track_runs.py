@@ -25,7 +25,7 @@ import gymnasium as gym
 import numpy as np
 from tqdm import tqdm
 
-from localization.localizer import MEASUREMENTS, AppearanceLocalizer
+from localization.localizer import MEASUREMENTS, AppearanceLocalizer, city_info
 from localization.workflows.plotting import plot_track
 from localization.workflows.tracking import (
     fit_city_localizer,
@@ -58,6 +58,8 @@ class TrackConfig:
         "help": "comma-separated start points (indices of the route's path, 5 cm apart)"})
     seed: int = field(default=0, metadata={"help": "seed of the fit and the runs"})
     out: str = field(default="results", metadata={"help": "output folder"})
+    allow_other_city: bool = field(default=False, metadata={
+        "help": "run a localizer fitted on another city (refused by default)"})
 
 
 def make_env(args: TrackConfig) -> gym.Env:
@@ -122,6 +124,7 @@ def run_tracking(args: TrackConfig, env: gym.Env | None = None,
     seconds = {}
     if localizer is None:
         localizer, seconds = get_localizer(env, args, out)
+    localizer.check_city(city_info(env), allow_other_city=args.allow_other_city)  # before work
     base = env.unwrapped
     rows = []
     t0 = time.perf_counter()
@@ -129,7 +132,8 @@ def run_tracking(args: TrackConfig, env: gym.Env | None = None,
             for s in args.starts.split(",")]
     for name, start in tqdm(runs, desc="tracking runs", unit="run"):
         result = track_route(env, localizer, name, args.steps, start=start,
-                             seed=args.seed + 100 + start)
+                             seed=args.seed + 100 + start,
+                             allow_other_city=args.allow_other_city)
         m = track_metrics(result)
         base.set_pose(result.true[0])  # the map shows the robot at the start
         png = plot_track(result, base.render(), base.city.bounds,

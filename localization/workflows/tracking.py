@@ -10,11 +10,15 @@ benchmark (:mod:`.benchmarks.filter`) and the tests.
   on that belief (closed loop, "representation" model) on which the calibration is refined:
   in closed loop the robot follows the belief's errors, which the true-pose drive does not
   show. The drives go where the training lanes go: around the route (``lanes="route"``) or
-  along random tours of all the streets, both ways (``lanes="streets"``).
+  along random tours of all the streets, both ways (``lanes="streets"``). The localizer
+  records its city (``city_``, :func:`~localization.localizer.city_info`) and, from one more
+  held-out drive, its quality report ``quality_`` (:mod:`.quality`), with a
+  :class:`~localization.workflows.quality.LocalizerQualityWarning` when it is poor.
 - :func:`track_route` / :func:`track_streets`: drive ``steps`` steps along the route / a
   random street tour with a pure-pursuit controller on the belief mean
   (:class:`~localization.wrappers.BeliefWrapper`), and dead-reckon the same commanded
-  controls from the true start pose (F alone).
+  controls from the true start pose (F alone). They refuse a localizer of another city
+  unless ``allow_other_city=True``.
 - :func:`track_metrics`: position RMSE of the belief and of dead reckoning, their ratio,
   heading RMSE, mean NEES and NIS, measurement acceptance.
 """
@@ -33,7 +37,8 @@ from scipy.stats import chi2
 from envs.datasets import PurePursuit, collect_dataset, drive_route, drive_streets
 from envs.lanes import street_tour
 from localization.geometry import Array, wrap_angle
-from localization.localizer import MEASUREMENTS, AppearanceLocalizer
+from localization.localizer import MEASUREMENTS, AppearanceLocalizer, city_info
+from localization.workflows.quality import quality_report, warn_quality
 from localization.wrappers import BeliefWrapper
 
 
@@ -62,6 +67,7 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
                        lane_options: dict[str, Any] | None = None,
                        calibrate_on_belief: bool = True,
                        measurements: tuple[str, ...] = MEASUREMENTS, progress: bool = False,
+                       quality_steps: int | None = None,
                        ) -> tuple[AppearanceLocalizer, dict[str, float]]:
     """Fit an :class:`AppearanceLocalizer` and its noise model on the env's city.
 
@@ -88,13 +94,28 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
     measurements : tuple of str
         Models whose consistency is calibrated.
     progress : bool
+    quality_steps : int, optional
+        Steps of the held-out drive of the quality report (seed ``seed + 3``; default
+        ``n_drive``; 0 skips it: its scores are then NaN).
 
     Returns
     -------
     localizer : AppearanceLocalizer
+        Fitted with the env's city (``city_``) and its quality report ``quality_``
+        (:func:`~localization.workflows.quality.quality_report`; the held-out drive uses the
+        "representation" model, or the first of ``measurements`` without it).
     seconds : dict
-        Wall time of each stage ("collect", "fit", "noise").
+        Wall time of each stage ("collect", "fit", "noise", "quality").
+
+    Warns
+    -----
+    LocalizerQualityWarning
+        If the belief is worse than dead reckoning on the held-out drive or a consistency
+        factor reached its bound (:func:`~localization.workflows.quality.warn_quality`).
     """
+    steps = n_drive if quality_steps is None else int(quality_steps)
+    if steps < 0:
+        raise ValueError(f"quality_steps must be >= 0 or None, got {quality_steps}")
     seconds = {}
     t0 = time.perf_counter()
     images, poses = collect_dataset(env, n_train, "lanes", seed=seed, progress=progress,
@@ -102,11 +123,21 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
     seconds["collect"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     loc = AppearanceLocalizer(**{"noise_folds": 0, **(localizer_params or {})})
-    loc.fit(images, poses, camera=getattr(env.unwrapped, "camera_name", None))
+    loc.fit(images, poses, camera=getattr(env.unwrapped, "camera_name", None),
+            city=city_info(env))
     seconds["fit"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     fit_city_noise(env, loc, lanes, n_drive, seed, calibrate_on_belief, measurements, progress)
     seconds["noise"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    metrics = None
+    if steps > 0:
+        model = "representation" if "representation" in measurements else measurements[0]
+        track = track_streets if lanes == "streets" else track_route
+        metrics = track_metrics(track(env, loc, model, steps, seed=seed + 3))
+    loc.quality_ = quality_report(metrics, loc.consistency_)
+    seconds["quality"] = time.perf_counter() - t0
+    warn_quality(loc.quality_)
     return loc, seconds
 
 
@@ -134,37 +165,42 @@ def fit_city_noise(env: gym.Env, localizer: AppearanceLocalizer, lanes: str = "r
 
 def track_route(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
                 steps: int, start: int = 0, seed: int = 0, keep_images: bool = False,
-                **wrapper_options: Any) -> TrackResult:
+                allow_other_city: bool = False, **wrapper_options: Any) -> TrackResult:
     """Drive ``steps`` steps along the city's route on the belief mean.
 
     The robot starts on the route's path point ``start`` (``PurePursuit.path``), heading
     along it; :class:`PurePursuit` steers on the belief mean (never on the true pose).
-    ``wrapper_options`` go to :class:`BeliefWrapper`.
+    ``wrapper_options`` go to :class:`BeliefWrapper`. A localizer fitted on another city
+    raises :class:`~localization.localizer.OtherCityError` unless ``allow_other_city``.
     """
     base = env.unwrapped
     pilot = PurePursuit(base.city.route(), w_max=base.W_MAX)
     return _track(env, localizer, measurement, pilot, pilot.start_pose(start), steps, seed,
-                  keep_images, wrapper_options)
+                  keep_images, allow_other_city, wrapper_options)
 
 
 def track_streets(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
                   steps: int, seed: int = 0, keep_images: bool = False,
-                  speed: float = 0.6, **wrapper_options: Any) -> TrackResult:
+                  speed: float = 0.6, allow_other_city: bool = False,
+                  **wrapper_options: Any) -> TrackResult:
     """Drive ``steps`` steps along a random tour of the streets (``envs.lanes.street_tour``
-    drawn from ``seed``) on the belief mean, from the tour's first intersection."""
+    drawn from ``seed``) on the belief mean, from the tour's first intersection (other
+    arguments as :func:`track_route`)."""
     base = env.unwrapped
     tour = street_tour(base.city, 1.5 * steps * base.dt * speed + 10.0,
                        np.random.default_rng(seed))
     pilot = PurePursuit(tour, speed=speed, w_max=base.W_MAX, closed=False)
     return _track(env, localizer, measurement, pilot, pilot.start_pose(0), steps, seed,
-                  keep_images, wrapper_options)
+                  keep_images, allow_other_city, wrapper_options)
 
 
 def _track(env: gym.Env, localizer: AppearanceLocalizer, measurement: str, pilot: PurePursuit,
-           start: Array, steps: int, seed: int, keep_images: bool,
+           start: Array, steps: int, seed: int, keep_images: bool, allow_other_city: bool,
            wrapper_options: dict[str, Any]) -> TrackResult:
     if measurement not in MEASUREMENTS:
         raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
+    if isinstance(localizer, AppearanceLocalizer):  # the wrapper says what else is wrong
+        localizer.check_city(city_info(env), allow_other_city=allow_other_city)
     base = env.unwrapped
     wrapped = BeliefWrapper(env, localizer, measurement, keep_image=keep_images,
                             **wrapper_options)

@@ -33,7 +33,7 @@ from agents.observations import NavigationObservation
 from agents.ppo import make_ppo, save_policy
 from agents.rewards import StreetProgressReward
 from agents.sources import POSE_SOURCES, make_pose_env
-from localization.localizer import AppearanceLocalizer
+from localization.localizer import AppearanceLocalizer, city_info
 from localization.workflows.agent_env import AgentEnvSettings
 
 __all__ = ["VEC_ENVS", "PolicyCheckpoint", "ProgressBar", "TrainConfig", "make_vec_env",
@@ -127,6 +127,14 @@ def train_agent(args: TrainConfig) -> dict:
         localizer = AppearanceLocalizer.load(args.localizer)
     venv = make_vec_env(args, localizer, args.n_envs, args.seed, args.vec_env)  # forks first
     eval_env = make_vec_env(args, localizer, 1, args.seed + 1_000_000)
+    if args.pose_source == "belief":  # the dummy eval env is in this process: its city
+        try:
+            localizer.check_city(city_info(eval_env.envs[0]),
+                                 allow_other_city=args.allow_other_city)
+        except ValueError:
+            venv.close()
+            eval_env.close()
+            raise
     model = make_ppo(venv, seed=args.seed, n_steps=args.n_steps, batch_size=args.batch_size)
     model.set_logger(configure(str(out), ["csv"]))
     evaluation = EvalCallback(eval_env, n_eval_episodes=args.eval_episodes,
