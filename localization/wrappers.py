@@ -31,8 +31,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike
 
-from localization._validation import check_bool, check_choice, check_seed
-from localization._validation import check_options
+from localization._validation import check_bool, check_choice, check_options, check_seed
 from localization.filtering.belief import BeliefFilter
 from localization.filtering.ekf import PoseEKF, check_gate_probability
 from localization.filtering.free_space import city_sampler
@@ -40,7 +39,6 @@ from localization.filtering.particles import ParticleBelief
 from localization.filtering.process_noise import world_process_noise
 from localization.geometry import Array, cov_to_triu, wrap_angle
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer
-
 
 FILTERS = ("ekf", "particles")
 LOCALIZE = ("image", "global")

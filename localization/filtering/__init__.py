@@ -13,8 +13,8 @@ simulator: runs on recorded data).
 """
 
 from localization.filtering.belief import STATUSES, BeliefFilter, Localizer
-from localization.filtering.divergence import BELIEF_STATUSES, DivergenceMonitor
 from localization.filtering.calibration import calibrate_consistency
+from localization.filtering.divergence import BELIEF_STATUSES, DivergenceMonitor
 from localization.filtering.ekf import (
     FunctionMeasurement,
     MeasurementModel,
