@@ -29,13 +29,13 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
-from envs.datasets import POSE_MARGIN, PurePursuit
+from envs.datasets import PurePursuit
 from envs.kidnapping import KidnapWrapper
-from envs.lanes import lane_poses, street_tour
+from envs.lanes import street_tour
 from localization.filtering.belief import BeliefFilter
+from localization.filtering.free_space import city_sampler
 from localization.filtering.particles import ParticleBelief
 from localization.geometry import Array
 
@@ -147,7 +147,8 @@ def evaluate_kidnapping(env: gym.Env, localizer: Any, n_kidnaps: int = 20,
                         filters: dict[str, dict[str, Any]] | None = None, within: int = 30,
                         ) -> dict[str, Any]:
     """Recovery of each filter over ``n_kidnaps`` recorded kidnap drives (seeds ``seed``,
-    ``seed + 1``, ...). ``filters``: name -> constructor options (default both, defaults).
+    ``seed + 1``, ...). ``filters``: name -> constructor options (default all of
+    ``FILTERS``, defaults).
 
     Returns
     -------
@@ -170,11 +171,10 @@ def evaluate_kidnapping(env: gym.Env, localizer: Any, n_kidnaps: int = 20,
 
 
 def street_sampler(city: Any) -> Any:
-    """``sample_free(n, rng) -> (n, 3)``: poses around the city's street lanes."""
-    def sample_free(n: int, rng: np.random.Generator) -> NDArray[np.float64]:
-        return lane_poses(city, n, rng, lanes="streets", lateral=0.6, heading=0.4,
-                          margin=POSE_MARGIN)[0]
-    return sample_free
+    """``sample_free(n, rng) -> (n, 3)``: poses along the city's streets (the sampler
+    :class:`~localization.wrappers.BeliefWrapper` uses,
+    :func:`localization.filtering.free_space.city_sampler`)."""
+    return city_sampler(city)
 
 
 def evaluate_global(env: gym.Env, localizer: Any, n_starts: int = 20, steps: int = 60,
