@@ -25,6 +25,14 @@ covariance plus ``diag(restart_std**2)`` (not the plain second moment of psi*'s 
 which counts its aliasing: so wide a restart let the next aliased measurement move the
 belief metres). A single aliased image
 therefore cannot move the belief; a kidnap is noticed in about ``window`` steps.
+
+Off by default (``BeliefFilter(detect_divergence=False)``, the wrapper's
+``filter_options={"detect_divergence": True}`` turns it on). Measured on held-out city 11
+(32 x 32, 3000 street images, 20 kidnaps, ``kidnap_eval``): recovered within 30 steps
+65 % (median 20 steps) against 0 % for the EKF without it, but 3 false restarts in the
+1200 tracking steps before the kidnaps, where psi* stayed aliased for ten steps while the
+EKF was right: RMSE before the kidnaps 1.08 m against 0.13 m. Until that is fixed the EKF's
+nominal behaviour stays the default.
 """
 
 from __future__ import annotations
