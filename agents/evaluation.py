@@ -1,12 +1,14 @@
 """Run navigation episodes and measure them: success, path-length ratio, collisions, time.
 
-Works with any agent that has ``reset()`` and ``act(obs)`` on belief observations and any env
+Works with any agent that has ``reset()`` and ``act(obs)`` (or ``act(obs, info)``: it then
+gets the step's info, e.g. ``belief_status``) on belief observations and any env
 whose ``info`` carries the true pose (``AppearanceNav-v0`` under a pose source from
 ``localization.wrappers``). The true pose is used here for scoring only.
 """
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -62,13 +64,15 @@ def run_episode(env: gym.Env, agent: Any, seed: int, planner: StreetPlanner | No
     planner = planner or StreetPlanner(base.city)
     obs, info = env.reset(seed=seed, options=options)
     agent.reset()
+    reads_info = "info" in inspect.signature(agent.act).parameters  # e.g. belief_status
     start = info["pose"].copy()
     shortest = max(path_length(planner.plan(start[:2], base.goal)) - base.GOAL_RADIUS, 0.0)
     travelled, collisions, sq_err, steps = 0.0, 0, [], 0
     terminated = truncated = False
     prev = start[:2]
     while not (terminated or truncated) and (max_steps is None or steps < max_steps):
-        obs, _, terminated, truncated, info = env.step(agent.act(obs))
+        action = agent.act(obs, info) if reads_info else agent.act(obs)
+        obs, _, terminated, truncated, info = env.step(action)
         pose = info["pose"]
         travelled += float(np.hypot(*(pose[:2] - prev)))
         prev = pose[:2]

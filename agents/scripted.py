@@ -19,10 +19,13 @@ from envs.driving import bearing, pursuit_turn_rate
 from localization._validation import check_array, check_real
 from localization.geometry import Array
 
-__all__ = ["BELIEF_KEYS", "Navigator", "ScriptedAgent", "check_belief_observation",
-           "pure_pursuit"]
+__all__ = ["BELIEF_KEYS", "SLOW_STATUSES", "STOP_STATUSES", "Navigator", "ScriptedAgent",
+           "check_belief_observation", "pure_pursuit"]
 
 BELIEF_KEYS = ("pose_mean", "pose_cov", "goal")
+#: ``info["belief_status"]`` values on which the agent does not steer on the belief
+STOP_STATUSES = ("lost",)
+SLOW_STATUSES = ("relocalizing", "ambiguous")
 OBS_NAMES = ("obs['pose_mean']", "obs['goal']")  # how Navigator.update names them in errors
 
 
@@ -128,14 +131,22 @@ class ScriptedAgent:
 
     Notes
     -----
-    ``act(obs)`` takes one belief observation (keys ``pose_mean``, ``pose_cov``, ``goal``) and
-    returns the action U = [v, w] (float32, inside the env's action Box). Call :meth:`reset`
-    between episodes (a new goal also starts a new plan).
+    ``act(obs, info)`` takes one belief observation (keys ``pose_mean``, ``pose_cov``,
+    ``goal``) and, optionally, the step's ``info``, and returns the action U = [v, w]
+    (float32, inside the env's action Box). When ``info["belief_status"]`` is "lost" the
+    agent does not steer on the belief: it stops and turns in place at ``look_rate`` to show
+    the camera new views; "relocalizing" or "ambiguous" scale the speed by ``slow_factor``.
+    The status comes through ``info``, not the observation, so every pose source keeps the
+    same observation space (and trained policies keep working). Call :meth:`reset` between
+    episodes (a new goal also starts a new plan).
     """
 
     def __init__(self, city: Any, lookahead: float = 0.6, speed: float = 0.9, w_max: float = 1.0,
-                 turn_in_place: float = 0.6, replan_distance: float = 1.0) -> None:
+                 turn_in_place: float = 0.6, replan_distance: float = 1.0,
+                 look_rate: float = 0.5, slow_factor: float = 0.5) -> None:
         self.navigator = Navigator(city, replan_distance)
+        self.look_rate = check_real(look_rate, "look_rate", low=0.0)
+        self.slow_factor = check_real(slow_factor, "slow_factor", low=0.0, high=1.0)
         self.lookahead, self.speed, self.w_max, self.turn_in_place = (
             check_real(v, name, low=0.0, low_open=True) for name, v in (
                 ("lookahead", lookahead), ("speed", speed), ("w_max", w_max),
@@ -151,10 +162,16 @@ class ScriptedAgent:
         path = self.navigator.path
         return None if path is None else path.points
 
-    def act(self, obs: Mapping[str, Any]) -> NDArray[np.float32]:
-        """The action U = [v, w] for one belief observation."""
+    def act(self, obs: Mapping[str, Any], info: Mapping[str, Any] | None = None
+            ) -> NDArray[np.float32]:
+        """The action U = [v, w] for one belief observation (and the step's ``info``)."""
         mean, _, goal = check_belief_observation(obs)
+        status = None if info is None else info.get("belief_status")
+        if status in STOP_STATUSES:
+            return np.array([0.0, min(self.look_rate, self.w_max)], dtype=np.float32)
         path = self.navigator.update(mean, goal, OBS_NAMES)
         u = pure_pursuit(mean, path.ahead(self.lookahead), path.remaining(), self.speed,
                          self.w_max, self.turn_in_place)
+        if status in SLOW_STATUSES:
+            u[0] *= self.slow_factor
         return u.astype(np.float32)

@@ -3,7 +3,10 @@
 ``make_pose_env(source, ...)`` builds ``AppearanceNav-v0`` wrapped in one of
 
 - ``"oracle"``: :class:`localization.wrappers.OracleWrapper` — the true pose (an upper bound);
-- ``"belief"``: :class:`localization.wrappers.BeliefWrapper` — the GSE/EKF belief from images;
+- ``"belief"``: :class:`localization.wrappers.BeliefWrapper` — the GSE belief from images, with
+  ``filter="ekf"`` (default) or ``filter="particles"`` (and ``filter_options``): one source
+  with a choice of filter rather than a source per filter, since both give the same
+  observation and ``info["belief_status"]``;
 - ``"dead_reckoning"``: :class:`localization.wrappers.DeadReckoningWrapper` — the motion model F
   alone from the true start pose,
 
@@ -89,7 +92,8 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
     start : {"lane", "random"}
         Start episodes on a street lane (:class:`LaneStart`) or anywhere free (the env's own).
     **belief_kwargs
-        More BeliefWrapper settings (``gate_probability``, ``relocalize_after``, ...).
+        More BeliefWrapper settings (``filter``, ``filter_options``, ``gate_probability``,
+        ``relocalize_after``, ...).
     """
     check_choice(source, "pose source", POSE_SOURCES)
     check_choice(start, "start", STARTS)

@@ -12,6 +12,7 @@ import gymnasium as gym
 from envs.appearance_nav import AppearanceNavEnv
 from envs.cameras import CAMERAS, make_camera, register_camera
 from envs.datasets import collect_dataset, load_dataset, save_dataset
+from envs.kidnapping import KIDNAP_RATE_PER_METRE, KidnapWrapper
 from envs.motion_model import UnicycleModel, wrap_angle
 from envs.scene import City, generate_city
 
@@ -24,8 +25,10 @@ if "AppearanceNav-v0" not in gym.registry:
 
 __all__ = [
     "CAMERAS",
+    "KIDNAP_RATE_PER_METRE",
     "AppearanceNavEnv",
     "City",
+    "KidnapWrapper",
     "UnicycleModel",
     "collect_dataset",
     "generate_city",

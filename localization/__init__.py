@@ -7,7 +7,7 @@ The public names, grouped by layer (imports flow one way, top to bottom)::
     features      PixelPCA, EfficientNetFeatures, SmallCNNFeatures, make_features
     gse           GrassmannStiefelEigenmaps, GSERegressor, jacobian_regression
     baselines     KernelRegressor, RetrievalRegressor (+ metrics, model_selection, ...)
-    filtering     PoseEKF, BeliefFilter, noise models
+    filtering     PoseEKF, BeliefFilter, ParticleBelief, noise models
     localizer     AppearanceLocalizer, city_info, OtherCityError
     wrappers      BeliefWrapper, OracleWrapper, DeadReckoningWrapper
     workflows     fit_city_localizer, track_route, ... (import the simulator)
@@ -44,6 +44,7 @@ _LAZY = {
     "PoseEKF": "filtering", "PoseMeasurement": "filtering",
     "FunctionMeasurement": "filtering", "OutOfDomainError": "filtering",
     "BeliefFilter": "filtering", "chi2_band": "filtering",
+    "ParticleBelief": "filtering",
     # the localizer and its Gymnasium wrappers
     "AppearanceLocalizer": "localizer", "MEASUREMENTS": "localizer",
     "OtherCityError": "localizer", "city_info": "localizer",
@@ -68,6 +69,7 @@ __all__ = [
     "OracleWrapper",
     "OtherCityError",
     "OutOfDomainError",
+    "ParticleBelief",
     "PixelPCA",
     "PoseEKF",
     "PoseMeasurement",

@@ -9,10 +9,13 @@ the (3, 3) covariance row by row: ``[Pxx, Pxy, Pxyaw, Pyy, Pyyaw, Pyawyaw]``
 (:func:`cov_to_triu` / :func:`triu_to_cov`). An agent trained on one pose source runs on the
 others unchanged.
 
-- :class:`BeliefWrapper`: the EKF of :mod:`localization.filtering.ekf` on an
-  :class:`~localization.localizer.AppearanceLocalizer`: predict with the known motion model F
-  and the commanded action, update with a GSE measurement model of the image, NIS-gated. The
-  true pose is never used by the belief.
+- :class:`BeliefWrapper`: a belief from appearance on an
+  :class:`~localization.localizer.AppearanceLocalizer`, ``filter="ekf"`` (the EKF of
+  :mod:`localization.filtering.belief`: predict with the known motion model F and the
+  commanded action, update with a GSE measurement model of the image, NIS-gated) or
+  ``filter="particles"`` (:class:`~localization.filtering.particles.ParticleBelief`:
+  thousands of hypotheses, the dominant one in ``pose_mean`` / ``pose_cov``). The true pose
+  is never used by the belief.
 - :class:`OracleWrapper`: the true pose with a small fixed covariance (an upper bound).
 - :class:`DeadReckoningWrapper`: F alone from the true start pose, covariance growing with Q.
 
@@ -28,12 +31,25 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import ArrayLike
 
-from localization._validation import check_bool, check_choice
+from localization._validation import check_bool, check_choice, check_options, check_seed
 from localization.filtering.belief import BeliefFilter
 from localization.filtering.ekf import PoseEKF, check_gate_probability
+from localization.filtering.free_space import city_sampler
+from localization.filtering.particles import ParticleBelief
 from localization.filtering.process_noise import world_process_noise
 from localization.geometry import Array, cov_to_triu, wrap_angle
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer
+
+FILTERS = ("ekf", "particles")
+LOCALIZE = ("image", "global")
+#: filter_options each filter takes (the rest of its settings are BeliefWrapper's arguments)
+FILTER_OPTIONS = {
+    "ekf": ("detect_divergence", "alpha", "inflate_factor"),
+    "particles": ("n_particles", "resample_threshold", "resample", "alpha", "alpha_slow",
+                  "alpha_fast", "injection_ratio", "max_injection", "n_neighbors",
+                  "proposal_noise", "global_proposal_fraction", "sample_free", "lost_ratio",
+                  "confident_weight", "mode_radius", "heading_scale", "seed"),
+}
 
 
 def _nees(mean: Array, P: Array, pose: ArrayLike) -> float:
@@ -85,15 +101,18 @@ class _PoseObservation(gym.ObservationWrapper):
 
 
 class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
-    """Replace the image observation by an EKF pose belief from appearance.
+    """Replace the image observation by a pose belief from appearance.
 
-    Each step: the prior ``x = F(x, k U)``, ``P = F P F^T + Q(x)`` with the commanded
-    (clipped) action U and the localizer's control gains k, then the EKF update with the
-    measurement of the chosen model from the new image, rejected when
+    ``filter="ekf"``: each step the prior ``x = F(x, k U)``, ``P = F P F^T + Q(x)`` with the
+    commanded (clipped) action U and the localizer's control gains k, then the EKF update
+    with the measurement of the chosen model from the new image, rejected when
     ``NIS > chi2.ppf(gate_probability, dim z)`` or when the GSE maps have no value there
-    (out of the training domain); see :class:`~localization.filtering.belief.BeliefFilter`. The initial
-    belief is psi* of the first image with the pose measurement noise: the true pose is
-    never used.
+    (out of the training domain); see :class:`~localization.filtering.belief.BeliefFilter`.
+    ``filter="particles"``: :class:`~localization.filtering.particles.ParticleBelief` on the
+    same F, Q and measurement model; ``pose_mean`` / ``pose_cov`` are its dominant mode,
+    never the average of distant modes. Both start from the first image (psi* of it, or
+    its proposals): the true pose is never used. The observation space is the same for
+    every filter.
 
     Parameters
     ----------
@@ -104,44 +123,75 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         Fitted for the same camera and image size, with its noise model
         (:meth:`~localization.localizer.AppearanceLocalizer.fit_noise`).
     measurement : {"pose", "features", "representation"}
-        The measurement model of the EKF update.
+        The measurement model of the update (the particles' likelihood).
     keep_image : bool
         Also pass the image through in the observation.
     gate_probability : float or None
-        Chi-square probability of the NIS gate (None disables gating).
+        Chi-square probability of the NIS gate (None disables gating; EKF only). The
+        particles cap their squared distances there.
     relocalize_after : int or None
-        After this many consecutive steps without an accepted measurement the belief is
+        EKF: after this many consecutive steps without an accepted measurement the belief is
         re-initialised from psi* of the current image (as at reset); None never does.
     inflate_after : int or None
-        From this many consecutive gated measurements on, P is inflated each step so the
+        EKF: from this many consecutive gated measurements on, P is inflated each step so the
         gate widens (see :class:`~localization.filtering.belief.BeliefFilter`); None never does.
+    filter : {"ekf", "particles"}
+    filter_options : dict, optional
+        More settings of the filter (``FILTER_OPTIONS[filter]``): for "ekf"
+        ``detect_divergence`` (True or DivergenceMonitor settings), ``alpha``,
+        ``inflate_factor``; for "particles" ParticleBelief's (``n_particles``, ...,
+        ``sample_free``: default poses along the map's streets, from
+        ``env.unwrapped.city.street_graph()``; ``seed``: default from ``reset(seed=...)``).
 
     Notes
     -----
-    ``info`` gets ``nis`` (NaN when none was computed), ``nis_dof`` (the measurement
-    dimension), ``measurement_status`` ("initial", "accepted", "gated", "out_of_domain" or
-    "relocalized") and ``nees`` (from ``info["pose"]``, for evaluation only).
+    ``reset(options={"localize": "global"})`` starts with an unknown pose (particles: over
+    the free streets and the image's proposals; EKF: the training poses' spread until the
+    images agree); the other options go to the env. ``info`` gets ``nis`` (NaN when none was
+    computed; always NaN for particles), ``nis_dof``, ``measurement_status`` (the filter's
+    own status), ``belief_status`` ("tracking", "ambiguous", "lost" or "relocalizing",
+    :data:`~localization.filtering.divergence.BELIEF_STATUSES`), ``hypotheses``
+    (``{"weights": (k,), "means": (k, 3)}``, heaviest first; one for the EKF) and ``nees``
+    (from ``info["pose"]``, for evaluation only).
     """
 
     def __init__(self, env: gym.Env, localizer: AppearanceLocalizer,
                  measurement: str = "representation", keep_image: bool = False,
                  gate_probability: float | None = 0.997, relocalize_after: int | None = 50,
-                 inflate_after: int | None = 3) -> None:
+                 inflate_after: int | None = 3, filter: str = "ekf",
+                 filter_options: dict[str, Any] | None = None) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self, localizer=localizer, measurement=measurement, keep_image=keep_image,
             gate_probability=gate_probability, relocalize_after=relocalize_after,
-            inflate_after=inflate_after)
+            inflate_after=inflate_after, filter=filter, filter_options=filter_options)
         check_choice(measurement, "measurement", MEASUREMENTS)
+        check_choice(filter, "filter", FILTERS)
+        options = check_options(filter_options, f"filter_options of filter {filter!r}",
+                                FILTER_OPTIONS[filter])
         gate_probability = check_gate_probability(gate_probability)
         _PoseObservation.__init__(self, env, keep_image)
         self._check_compatible(env, localizer)
         self.localizer = localizer
         self.measurement = measurement
-        self.belief = BeliefFilter(localizer, env.unwrapped.motion_model, measurement,
-                                   gate_probability, relocalize_after,
-                                   inflate_after=inflate_after)
-        self._dof = int(np.asarray(self.belief.model.R_at(np.zeros(3))).shape[0]) \
+        self.filter = filter
+        mm = env.unwrapped.motion_model
+        if filter == "ekf":
+            self.belief: BeliefFilter | ParticleBelief = BeliefFilter(
+                localizer, mm, measurement, gate_probability, relocalize_after,
+                inflate_after=inflate_after, **options)
+        else:
+            if gate_probability is None:
+                raise ValueError("filter 'particles' needs a gate_probability in (0, 1) "
+                                 "(its distances are capped there), got None")
+            if "sample_free" not in options and hasattr(env.unwrapped, "city"):
+                options["sample_free"] = city_sampler(env.unwrapped.city)
+            self._seeded = "seed" in options
+            self.belief = ParticleBelief(localizer, mm, measurement,
+                                         gate_probability=gate_probability, **options)
+        self._dof = int(np.asarray(localizer.noise_["features"]).shape[0]) \
             if measurement == "features" else 3
+        self.belief_status = "tracking"
+        self._localize = "image"
 
     @staticmethod
     def _check_compatible(env: gym.Env, localizer: AppearanceLocalizer) -> None:
@@ -160,37 +210,62 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None,
               ) -> tuple[dict[str, Any], dict[str, Any]]:
-        """Reset the env; the initial belief is psi* of the first image with its noise.
+        """Reset the env and start the belief from the first image (see the class Notes).
 
-        If the first image is outside the training domain the belief starts at the centre
+        If the first image is outside the training domain the EKF starts at the centre
         of the training poses with their spread as covariance (status "out_of_domain").
         """
+        options = dict(options) if options is not None else None
+        localize = "image" if options is None else options.pop("localize", "image")
+        self._localize = check_choice(localize, "options['localize']", LOCALIZE)
+        seed = check_seed(seed, "seed", optional=True)
         obs, info = self.env.reset(seed=seed, options=options)
-        status = self.belief.reset(self.localizer.transform(obs["image"])[0])
+        w = self.localizer.transform(obs["image"])[0]
+        if isinstance(self.belief, ParticleBelief):
+            if seed is not None and not self._seeded:
+                self.belief.rng = np.random.default_rng([seed, 0x5EED])
+            status = self.belief.reset(w, mode=localize)
+        else:
+            status = self.belief.reset(w, mode=localize)
+        self.belief_status = "relocalizing" if localize == "global" else "tracking"
         self._publish(info, np.nan, status)
         return self.observation(obs), info
 
     def step(self, action: Any) -> tuple[dict[str, Any], SupportsFloat, bool, bool,
                                          dict[str, Any]]:
         """Step the env, then predict with F(x, k U) and update with the new image."""
-        if self.belief.ekf is None:
+        if self.mean is None:
             raise gym.error.ResetNeeded("call reset() before step()")
         obs, reward, terminated, truncated, info = self.env.step(action)
         nis, status = self.belief.step(self._control(action),
                                        self.localizer.transform(obs["image"])[0])
-        self._publish(info, nis, status)
+        self._publish(info, nis if self.filter == "ekf" else np.nan, status)
         return self.observation(obs), reward, terminated, truncated, info
 
     @property
     def ekf(self) -> PoseEKF | None:
-        """The underlying filter (None before reset)."""
-        return self.belief.ekf
+        """The underlying EKF (None before reset, and for the particle filter)."""
+        return getattr(self.belief, "ekf", None)
+
+    @property
+    def hypotheses(self) -> dict[str, Array]:
+        """``{"weights": (k,), "means": (k, 3)}``, heaviest first (one for the EKF)."""
+        if isinstance(self.belief, ParticleBelief):
+            h = self.belief.hypotheses
+            return {"weights": h["weights"], "means": h["means"]}
+        return {"weights": np.ones(1), "means": self.belief.x[None]}
 
     def _publish(self, info: dict[str, Any], nis: float, status: str) -> None:
         self.mean, self.cov = self.belief.x, self.belief.P
+        if isinstance(self.belief, BeliefFilter):
+            self.belief_status = self.belief.belief_status
+        elif status not in ("initial", "out_of_domain"):  # else: as it was
+            self.belief_status = status
         info["nis"] = float(nis)
         info["nis_dof"] = self._dof
         info["measurement_status"] = status
+        info["belief_status"] = self.belief_status
+        info["hypotheses"] = self.hypotheses
         self._add_nees(info)
 
 

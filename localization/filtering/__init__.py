@@ -7,11 +7,14 @@ simulator: runs on recorded data).
   :func:`estimate_control_gain`, :func:`world_process_noise`);
 - measurement noise R from residuals (:func:`robust_covariance`, :func:`correlation_time`,
   :func:`inflate`) and the consistency calibration (:func:`calibrate_consistency`);
-- :class:`BeliefFilter`: the EKF fed with image features by a fitted localizer.
+- :class:`BeliefFilter`: the EKF fed with image features by a fitted localizer, with its
+  divergence detection (:class:`DivergenceMonitor`);
+- :class:`ParticleBelief`: the multi-hypothesis (particle-filter) belief.
 """
 
 from localization.filtering.belief import STATUSES, BeliefFilter, Localizer
 from localization.filtering.calibration import calibrate_consistency
+from localization.filtering.divergence import BELIEF_STATUSES, DivergenceMonitor
 from localization.filtering.ekf import (
     FunctionMeasurement,
     MeasurementModel,
@@ -29,6 +32,7 @@ from localization.filtering.measurement_noise import (
     inflate,
     robust_covariance,
 )
+from localization.filtering.particles import PARTICLE_STATUSES, ParticleBelief
 from localization.filtering.process_noise import (
     estimate_control_gain,
     estimate_process_noise,
@@ -37,12 +41,16 @@ from localization.filtering.process_noise import (
 )
 
 __all__ = [
+    "BELIEF_STATUSES",
+    "PARTICLE_STATUSES",
     "STATUSES",
     "BeliefFilter",
+    "DivergenceMonitor",
     "FunctionMeasurement",
     "Localizer",
     "MeasurementModel",
     "OutOfDomainError",
+    "ParticleBelief",
     "PoseEKF",
     "PoseMeasurement",
     "UpdateResult",

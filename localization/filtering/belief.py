@@ -17,6 +17,13 @@ measurements through (one moved a belief 2.5 m sideways). An isolated outlier (e
 corrupted image) changes nothing. After ``relocalize_after`` steps in a row without an
 accepted measurement the belief restarts from psi* of the current image, as at the start.
 
+Divergence detection (``detect_divergence``, :mod:`localization.filtering.divergence`): a
+windowed NIS test and psi*'s disagreement with the belief mark it "lost" and, both together,
+restart it within a few steps at the pose the window's images agree on. ``belief_status``
+says what the belief knows about itself ("tracking", "lost", "relocalizing"; see
+``BELIEF_STATUSES``); a start with ``mode="global"`` (unknown pose) is "relocalizing" from
+the training poses' spread until the images agree.
+
 :class:`~localization.wrappers.BeliefWrapper` drives it from an env;
 :meth:`AppearanceLocalizer.fit_noise` runs it over a recorded drive to calibrate the noise.
 """
@@ -29,6 +36,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from localization._validation import check_int, check_real
+from localization.filtering.divergence import DivergenceMonitor
 from localization.filtering.ekf import (
     OutOfDomainError,
     PoseEKF,
@@ -69,6 +77,9 @@ def check_localizer(localizer: object) -> Localizer:
 
 
 STATUSES = ("initial", "accepted", "gated", "out_of_domain", "relocalized")
+RESET_MODES = ("image", "global")
+CONFIRM_STEPS = 3  # accepted measurements after a restart before the status is "tracking"
+LOST_AFTER_MISSES = 5  # steps in a row without an accepted measurement: "lost"
 MAX_HEADING_STD = 0.5  # rad: heading inflation stops there
 
 
@@ -94,19 +105,25 @@ class BeliefFilter:
     alpha : array_like (3,), optional
         Body-frame covariance inflation (along, cross, heading) of Q, R and P0; default the
         localizer's calibrated ``consistency_[measurement]``.
+    detect_divergence : bool or dict
+        Run a :class:`~localization.filtering.divergence.DivergenceMonitor` (a dict: its
+        settings); False: off (the EKF as before).
 
     Attributes
     ----------
     ekf : PoseEKF or None
         None before :meth:`reset`.
     last_update : UpdateResult or None
+    belief_status : one of ``BELIEF_STATUSES``
+    monitor : DivergenceMonitor or None
     """
 
     def __init__(self, localizer: Localizer, motion_model: Any,
                  measurement: str = "representation",
                  gate_probability: float | None = 0.997, relocalize_after: int | None = 50,
                  alpha: ArrayLike | None = None, inflate_after: int | None = 3,
-                 inflate_factor: float = 2.0) -> None:
+                 inflate_factor: float = 2.0,
+                 detect_divergence: bool | dict[str, Any] = False) -> None:
         check_localizer(localizer)
         motion_model = check_motion_model(motion_model)
         gate_probability = check_gate_probability(gate_probability)
@@ -129,6 +146,10 @@ class BeliefFilter:
         self.last_update: UpdateResult | None = None
         self.misses = 0
         self.gated = 0
+        self.monitor = _monitor(detect_divergence)
+        self.belief_status = "tracking"
+        self._confirm = 0
+        self._forced = self._lost_now = False
 
     @property
     def x(self) -> Array:
@@ -153,6 +174,9 @@ class BeliefFilter:
         self.ekf = PoseEKF(self.motion_model, self._Q, x0, P0,
                            gate_probability=self.gate_probability)
         self.misses = self.gated = 0
+        self._confirm, self._forced = 0, False
+        if self.monitor is not None:
+            self.monitor.clear()
 
     def _from_image(self, w: Array) -> bool:
         x0, P0 = self.localizer.initial_belief(w)
@@ -161,27 +185,41 @@ class BeliefFilter:
         self._start(x0, P0)
         return True
 
-    def reset(self, w: ArrayLike, x0: ArrayLike | None = None, P0: ArrayLike | None = None
-              ) -> str:
+    def reset(self, w: ArrayLike, x0: ArrayLike | None = None, P0: ArrayLike | None = None,
+              mode: str = "image") -> str:
         """Start the belief from the first image's features ``w`` (m,): psi*(w) with its
         noise, or from ``x0``, ``P0`` when given (e.g. a known start for calibration).
 
         If psi*(w) is out of domain the belief starts at the centre of the training poses
         with their spread as covariance and relocalizes at the next in-domain image.
+        ``mode="global"`` (an unknown start, ``x0`` not allowed) starts there too, with
+        ``belief_status`` "relocalizing": with ``detect_divergence`` the belief restarts
+        where the first images agree; without, at the next image's psi*.
 
         Returns
         -------
         status : "initial" or "out_of_domain"
         """
+        if mode not in RESET_MODES:
+            raise ValueError(f"unknown reset mode {mode!r}; choose one of {RESET_MODES}")
+        if mode == "global" and x0 is not None:
+            raise ValueError("mode='global' starts from an unknown pose: do not pass x0")
         self.last_update = None
+        self.belief_status = "tracking"
         if x0 is not None:
             self._start(x0, P0 if P0 is not None else np.diag([0.01, 0.01, 0.001]))
             return "initial"
-        if self._from_image(np.asarray(w, dtype=np.float64)):
+        if mode == "image" and self._from_image(np.asarray(w, dtype=np.float64)):
             return "initial"
         mean, cov = self.localizer.prior()
         self._start(mean, cov)
-        self.misses = self.relocalize_after or 0
+        if self.monitor is not None and mode == "global":
+            self._forced = True  # restart where the images agree
+        else:
+            self.misses = self.relocalize_after or 0
+        if mode == "global":
+            self.belief_status = "relocalizing"
+            return "initial"
         return "out_of_domain"
 
     def step(self, u: ArrayLike, w: ArrayLike) -> tuple[float, str]:
@@ -212,7 +250,57 @@ class BeliefFilter:
             if (self.relocalize_after is not None and self.misses >= self.relocalize_after
                     and self._from_image(w)):
                 status = "relocalized"
+        self._lost_now = False
+        if status == "relocalized":
+            self.belief_status = "relocalizing"
+        elif self.monitor is not None:
+            status = self._watch(u, w, nis, status)
+        self._update_status(status)
         return nis, status
+
+    def _watch(self, u: ArrayLike, w: Array, nis: float, status: str) -> str:
+        """Feed the divergence monitor; restart from the proposals when it says so."""
+        assert self.ekf is not None and self.monitor is not None
+        self.monitor.move_proposals(self.motion_model, self.gain * np.asarray(u, float))
+        psi = np.asarray(self.localizer.measure(w, "pose"), dtype=np.float64)
+        dim_z = self.last_update.dim_z if self.last_update is not None else 3
+        verdict = self.monitor.observe(nis, dim_z, psi, self.ekf.x, self.ekf.P,
+                                       status != "accepted", forced=self._forced)
+        if verdict.restart is not None and self._restart_explains(
+                verdict.restart, verdict.restart_cov, w):
+            self.belief_status = "relocalizing"
+            return "relocalized"
+        self._lost_now = verdict.lost
+        return status
+
+    def _restart_explains(self, x0: Array, P0: Array, w: Array) -> bool:
+        """Restart at ``x0``, ``P0`` and update with the current image, if that image's
+        measurement passes the gate there (a cluster of aliased proposals whose place the
+        image does not fit is refused; the belief is left alone)."""
+        prior, kept, forced = self.ekf, (self.misses, self.gated), self._forced
+        self._start(x0, P0)
+        z = self.localizer.measure(w, self.measurement)
+        try:
+            ok = bool(np.all(np.isfinite(z))) and self.ekf.update(z, self.model).accepted
+        except OutOfDomainError:
+            ok = False
+        if not ok and not forced:
+            self.ekf, (self.misses, self.gated) = prior, kept
+        return ok or forced  # an unknown start takes the agreed place either way
+
+    def _update_status(self, status: str) -> None:
+        """"relocalizing" until ``CONFIRM_STEPS`` accepted measurements; otherwise "lost"
+        while the monitor says so or after ``LOST_AFTER_MISSES`` steps in a row without an
+        accepted measurement, else "tracking"."""
+        if status == "relocalized":
+            return
+        if self.belief_status == "relocalizing":
+            self._confirm += status == "accepted" and not self._forced
+            if self._confirm >= CONFIRM_STEPS:
+                self.belief_status = "tracking"
+            return
+        lost = self._lost_now or self.misses >= LOST_AFTER_MISSES
+        self.belief_status = "lost" if lost else "tracking"
 
     def _update(self, w: Array) -> tuple[float, str]:
         assert self.ekf is not None
@@ -248,3 +336,17 @@ class BeliefFilter:
             means.append(self.x)
             covs.append(self.P)
         return np.array(means), np.array(covs), statuses
+
+
+def _monitor(detect: bool | dict[str, Any]) -> DivergenceMonitor | None:
+    """The monitor for ``detect_divergence``: False -> None, True -> defaults, dict -> its
+    settings."""
+    if isinstance(detect, dict):
+        try:
+            return DivergenceMonitor(**detect)
+        except TypeError as err:
+            raise TypeError(f"detect_divergence: {err}") from None
+    if isinstance(detect, (bool, np.bool_)):
+        return DivergenceMonitor() if detect else None
+    raise TypeError(f"detect_divergence must be a bool or a dict of DivergenceMonitor settings, "
+                    f"got {detect!r}")

@@ -8,7 +8,9 @@ same images and controls):
    :class:`envs.kidnapping.KidnapWrapper` then teleports it (at least ``min_distance`` m,
    unannounced) and it drives a new tour from there for ``steps_after`` steps.
 2. :func:`run_filter` replays the drive through a filter that starts at the true start pose:
-   "ekf" (:class:`~localization.filtering.belief.BeliefFilter`, as it is) or "particles"
+   "ekf" (:class:`~localization.filtering.belief.BeliefFilter` as it was, waiting for 50
+   steps without an accepted measurement), "ekf_detect" (the same with its divergence
+   detection, :mod:`localization.filtering.divergence`) or "particles"
    (:class:`~localization.filtering.particles.ParticleBelief`).
 3. :func:`steps_to_recover`: steps from the kidnap until the position error stays below
    ``RECOVERED_ERROR`` (0.5 m) for ``RECOVERED_STEPS`` (10) steps in a row (the first of
@@ -27,13 +29,13 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
-from envs.datasets import POSE_MARGIN, PurePursuit
+from envs.datasets import PurePursuit
 from envs.kidnapping import KidnapWrapper
-from envs.lanes import lane_poses, street_tour
+from envs.lanes import street_tour
 from localization.filtering.belief import BeliefFilter
+from localization.filtering.free_space import city_sampler
 from localization.filtering.particles import ParticleBelief
 from localization.geometry import Array
 
@@ -42,7 +44,7 @@ __all__ = ["KidnapDrive", "evaluate_global", "evaluate_kidnapping", "particle_st
 
 RECOVERED_ERROR = 0.5  # m
 RECOVERED_STEPS = 10
-FILTERS = ("ekf", "particles")
+FILTERS = ("ekf", "ekf_detect", "particles")
 
 
 @dataclass
@@ -111,12 +113,13 @@ def record_kidnap_drive(env: gym.Env, localizer: Any, steps_before: int, steps_a
 
 def run_filter(name: str, drive: KidnapDrive, localizer: Any, motion_model: Any,
                seed: int = 0, **options: Any) -> tuple[Array, Array, list[str]]:
-    """Replay ``drive`` through filter ``name`` ("ekf" or "particles") started at the true
+    """Replay ``drive`` through filter ``name`` (one of ``FILTERS``) started at the true
     start pose; ``options`` go to its constructor. Returns means, covs, statuses."""
     if name not in FILTERS:
         raise ValueError(f"unknown filter {name!r}; choose one of {FILTERS}")
     P0 = np.diag([0.01, 0.01, 0.001])
-    if name == "ekf":
+    if name in ("ekf", "ekf_detect"):
+        options = {"detect_divergence": name == "ekf_detect", **options}
         f: Any = BeliefFilter(localizer, motion_model, **options)
     else:
         f = ParticleBelief(localizer, motion_model, seed=seed, **options)
@@ -144,7 +147,8 @@ def evaluate_kidnapping(env: gym.Env, localizer: Any, n_kidnaps: int = 20,
                         filters: dict[str, dict[str, Any]] | None = None, within: int = 30,
                         ) -> dict[str, Any]:
     """Recovery of each filter over ``n_kidnaps`` recorded kidnap drives (seeds ``seed``,
-    ``seed + 1``, ...). ``filters``: name -> constructor options (default both, defaults).
+    ``seed + 1``, ...). ``filters``: name -> constructor options (default all of
+    ``FILTERS``, defaults).
 
     Returns
     -------
@@ -167,11 +171,10 @@ def evaluate_kidnapping(env: gym.Env, localizer: Any, n_kidnaps: int = 20,
 
 
 def street_sampler(city: Any) -> Any:
-    """``sample_free(n, rng) -> (n, 3)``: poses around the city's street lanes."""
-    def sample_free(n: int, rng: np.random.Generator) -> NDArray[np.float64]:
-        return lane_poses(city, n, rng, lanes="streets", lateral=0.6, heading=0.4,
-                          margin=POSE_MARGIN)[0]
-    return sample_free
+    """``sample_free(n, rng) -> (n, 3)``: poses along the city's streets (the sampler
+    :class:`~localization.wrappers.BeliefWrapper` uses,
+    :func:`localization.filtering.free_space.city_sampler`)."""
+    return city_sampler(city)
 
 
 def evaluate_global(env: gym.Env, localizer: Any, n_starts: int = 20, steps: int = 60,

@@ -171,6 +171,38 @@ CASES += [
          "relocalize_after"),
     Case("bw-size", lambda ctx: BeliefWrapper(gym.make("AppearanceNav-v0", image_size=(24, 24)),
                                               ctx.localizer), V, "image"),
+    Case("bw-filter", lambda ctx: BeliefWrapper(ctx.env, ctx.localizer, filter="kalman"), V,
+         "filter"),
+    Case("bw-filter-type", lambda ctx: BeliefWrapper(ctx.env, ctx.localizer, filter=None), V,
+         "filter"),
+    Case("bw-filter-options-type", lambda ctx: BeliefWrapper(ctx.env, ctx.localizer,
+                                                             filter_options=[1]), T,
+         "filter_options"),
+    Case("bw-filter-options-key", lambda ctx: BeliefWrapper(
+        ctx.env, ctx.localizer, filter_options={"n_particles": 10}), V, "n_particles"),
+    Case("bw-pf-options-key", lambda ctx: BeliefWrapper(
+        ctx.env, ctx.localizer, filter="particles", filter_options={"detect_divergence": True}),
+         V, "detect_divergence"),
+    Case("bw-pf-particles-0", lambda ctx: BeliefWrapper(
+        ctx.env, ctx.localizer, filter="particles", filter_options={"n_particles": 0}), V,
+         "n_particles"),
+    Case("bw-pf-particles-neg", lambda ctx: BeliefWrapper(
+        ctx.env, ctx.localizer, filter="particles", filter_options={"n_particles": -3}), V,
+         "n_particles"),
+    Case("bw-pf-gate-none", lambda ctx: BeliefWrapper(
+        ctx.env, ctx.localizer, filter="particles", gate_probability=None), V,
+         "gate_probability"),
+    Case("bw-detect-type", lambda ctx: BeliefWrapper(
+        ctx.env, ctx.localizer, filter_options={"detect_divergence": "yes"}), T,
+         "detect_divergence"),
+    Case("bw-detect-window", lambda ctx: BeliefWrapper(
+        ctx.env, ctx.localizer, filter_options={"detect_divergence": {"window": 1}}), V,
+         "window"),
+    Case("bw-detect-key", lambda ctx: BeliefWrapper(
+        ctx.env, ctx.localizer, filter_options={"detect_divergence": {"windw": 8}}), T,
+         "detect_divergence"),
+    Case("bw-localize", lambda ctx: BeliefWrapper(ctx.env, ctx.localizer).reset(
+        seed=0, options={"localize": "everywhere"}), V, "localize"),
     Case("oracle-std-shape", lambda ctx: OracleWrapper(ctx.env, std=(0.1, 0.1)), V, "std"),
     Case("oracle-std-neg", lambda ctx: OracleWrapper(ctx.env, std=(0.1, -0.1, 0.1)), V, "std"),
     Case("oracle-std-nan", lambda ctx: OracleWrapper(ctx.env, std=(np.nan, 0.1, 0.1)), V, "std"),
