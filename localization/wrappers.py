@@ -38,7 +38,7 @@ from localization.filtering.free_space import city_sampler
 from localization.filtering.particles import ParticleBelief
 from localization.filtering.process_noise import world_process_noise
 from localization.geometry import Array, cov_to_triu, wrap_angle
-from localization.localizer import MEASUREMENTS, AppearanceLocalizer
+from localization.localizer import MEASUREMENTS, AppearanceLocalizer, city_info
 
 FILTERS = ("ekf", "particles")
 LOCALIZE = ("image", "global")
@@ -136,6 +136,9 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         EKF: from this many consecutive gated measurements on, P is inflated each step so the
         gate widens (see :class:`~localization.filtering.belief.BeliefFilter`); None never does.
     filter : {"ekf", "particles"}
+    allow_other_city : bool
+        Run a localizer fitted on another city (refused by default with
+        :class:`~localization.localizer.OtherCityError`: the maps would alias silently).
     filter_options : dict, optional
         More settings of the filter (``FILTER_OPTIONS[filter]``): for "ekf"
         ``detect_divergence`` (True or DivergenceMonitor settings), ``alpha``,
@@ -159,11 +162,13 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
                  measurement: str = "representation", keep_image: bool = False,
                  gate_probability: float | None = 0.997, relocalize_after: int | None = 50,
                  inflate_after: int | None = 3, filter: str = "ekf",
-                 filter_options: dict[str, Any] | None = None) -> None:
+                 filter_options: dict[str, Any] | None = None,
+                 allow_other_city: bool = False) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self, localizer=localizer, measurement=measurement, keep_image=keep_image,
             gate_probability=gate_probability, relocalize_after=relocalize_after,
-            inflate_after=inflate_after, filter=filter, filter_options=filter_options)
+            inflate_after=inflate_after, filter=filter, filter_options=filter_options,
+            allow_other_city=allow_other_city)
         check_choice(measurement, "measurement", MEASUREMENTS)
         check_choice(filter, "filter", FILTERS)
         options = check_options(filter_options, f"filter_options of filter {filter!r}",
@@ -171,6 +176,8 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         gate_probability = check_gate_probability(gate_probability)
         _PoseObservation.__init__(self, env, keep_image)
         self._check_compatible(env, localizer)
+        localizer.check_city(city_info(env), allow_other_city=check_bool(
+            allow_other_city, "allow_other_city"))
         self.localizer = localizer
         self.measurement = measurement
         self.filter = filter

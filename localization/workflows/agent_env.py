@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["AgentEnvSettings"]
+__all__ = ["AgentEnvSettings", "city_options"]
 
 
 @dataclass
@@ -26,3 +26,9 @@ class AgentEnvSettings:
     max_episode_steps: int = field(default=400, metadata={"help": "episode truncation"})
     allow_other_city: bool = field(default=False, metadata={
         "help": "run a localizer fitted on another city (refused by default)"})
+
+
+def city_options(source: str, allow_other_city: bool) -> dict[str, bool]:
+    """``make_pose_env`` keywords for the city check: only the belief runs the localizer's maps
+    (dead reckoning takes only its Q, the oracle nothing)."""
+    return {"allow_other_city": allow_other_city} if source == "belief" else {}

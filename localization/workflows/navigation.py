@@ -29,8 +29,8 @@ from agents.evaluation import as_records, run_episodes, summarize
 from agents.ppo import PPOAgent
 from agents.scripted import ScriptedAgent
 from agents.sources import POSE_SOURCES, make_pose_env
-from localization.localizer import AppearanceLocalizer, city_info
-from localization.workflows.agent_env import AgentEnvSettings
+from localization.localizer import AppearanceLocalizer
+from localization.workflows.agent_env import AgentEnvSettings, city_options
 
 __all__ = ["AGENTS", "EvalConfig", "agents_table", "evaluate_agents"]
 
@@ -79,9 +79,8 @@ def evaluate_agents(args: EvalConfig) -> list[dict]:
                             scene_seed=args.scene_seed, camera=args.camera,
                             image_size=(args.image_size, args.image_size),
                             motion_noise=args.motion_noise,
-                            max_episode_steps=args.max_episode_steps, start=args.start)
-        if source == "belief":  # dead reckoning takes only Q from the localizer
-            localizer.check_city(city_info(env), allow_other_city=args.allow_other_city)
+                            max_episode_steps=args.max_episode_steps, start=args.start,
+                            **city_options(source, args.allow_other_city))
         city = env.unwrapped.city
         for name in args.agents.split(","):
             if name == "scripted":

@@ -199,11 +199,9 @@ def _track(env: gym.Env, localizer: AppearanceLocalizer, measurement: str, pilot
            wrapper_options: dict[str, Any]) -> TrackResult:
     if measurement not in MEASUREMENTS:
         raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
-    if isinstance(localizer, AppearanceLocalizer):  # the wrapper says what else is wrong
-        localizer.check_city(city_info(env), allow_other_city=allow_other_city)
     base = env.unwrapped
     wrapped = BeliefWrapper(env, localizer, measurement, keep_image=keep_images,
-                            **wrapper_options)
+                            allow_other_city=allow_other_city, **wrapper_options)
     obs, info = wrapped.reset(seed=seed, options={"pose": start})
     rows = {"true": [info["pose"]], "mean": [wrapped.mean], "cov": [wrapped.cov],
             "nis": [info["nis"]], "nees": [info["nees"]]}

@@ -33,8 +33,8 @@ from agents.observations import NavigationObservation
 from agents.ppo import make_ppo, save_policy
 from agents.rewards import StreetProgressReward
 from agents.sources import POSE_SOURCES, make_pose_env
-from localization.localizer import AppearanceLocalizer, city_info
-from localization.workflows.agent_env import AgentEnvSettings
+from localization.localizer import AppearanceLocalizer
+from localization.workflows.agent_env import AgentEnvSettings, city_options
 
 __all__ = ["VEC_ENVS", "PolicyCheckpoint", "ProgressBar", "TrainConfig", "make_vec_env",
            "train_agent"]
@@ -97,16 +97,19 @@ class PolicyCheckpoint(BaseCallback):
 
 
 def make_vec_env(args: TrainConfig, localizer: AppearanceLocalizer | None, n: int, seed: int,
-                 kind: str = "dummy") -> VecEnv:
+                 kind: str = "dummy", check_city: bool = True) -> VecEnv:
     """``n`` navigation envs on the pose source, seeded from ``seed``, in this process
     (``kind="dummy"``) or each in a forked worker (``"subproc"``: the workers inherit the
-    loaded localizer, nothing is pickled; fork before this process opens a GL context)."""
+    loaded localizer, nothing is pickled; fork before this process opens a GL context).
+    ``check_city=False`` skips the belief's city check (done once in this process instead)."""
     def make() -> NavigationObservation:
         env = make_pose_env(args.pose_source, localizer, measurement=args.measurement or None,
                             scene_seed=args.scene_seed, camera=args.camera,
                             image_size=(args.image_size, args.image_size),
                             motion_noise=args.motion_noise,
-                            max_episode_steps=args.max_episode_steps, start=args.start)
+                            max_episode_steps=args.max_episode_steps, start=args.start,
+                            **city_options(args.pose_source,
+                                           args.allow_other_city or not check_city))
         return Monitor(NavigationObservation(StreetProgressReward(env)))
     if kind not in VEC_ENVS:
         raise ValueError(f"unknown vec_env {kind!r}; choose one of {VEC_ENVS}")
@@ -125,16 +128,14 @@ def train_agent(args: TrainConfig) -> dict:
     localizer = None
     if args.pose_source != "oracle":
         localizer = AppearanceLocalizer.load(args.localizer)
-    venv = make_vec_env(args, localizer, args.n_envs, args.seed, args.vec_env)  # forks first
-    eval_env = make_vec_env(args, localizer, 1, args.seed + 1_000_000)
-    if args.pose_source == "belief":  # the dummy eval env is in this process: its city
-        try:
-            localizer.check_city(city_info(eval_env.envs[0]),
-                                 allow_other_city=args.allow_other_city)
-        except ValueError:
-            venv.close()
-            eval_env.close()
-            raise
+    # fork the workers first (before this process opens a GL context); the city is checked
+    # once, in this process, by the evaluation env's BeliefWrapper (OtherCityError)
+    venv = make_vec_env(args, localizer, args.n_envs, args.seed, args.vec_env, check_city=False)
+    try:
+        eval_env = make_vec_env(args, localizer, 1, args.seed + 1_000_000)
+    except ValueError:
+        venv.close()
+        raise
     model = make_ppo(venv, seed=args.seed, n_steps=args.n_steps, batch_size=args.batch_size)
     model.set_logger(configure(str(out), ["csv"]))
     evaluation = EvalCallback(eval_env, n_eval_episodes=args.eval_episodes,
