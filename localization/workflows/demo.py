@@ -16,6 +16,9 @@ Stages:
 3. closed-loop tracking: for each measurement model drive ``steps`` steps of the route
    with a pure-pursuit controller on the belief mean, against dead reckoning; write
    ``<out>/track_<model>.png`` and print the results table (also ``<out>/demo.md``);
+   then the kidnapping stage (``kidnap``): one unannounced kidnap on a street drive, the EKF
+   and the particle belief side by side, ``<out>/kidnap.png``
+   (:func:`localization.workflows.kidnap_demo.kidnap_demo`);
 4. navigation: the scripted agent (street planner + pure pursuit) drives ``episodes``
    seeded episodes to random goals on each pose source (true pose, belief, dead reckoning;
    :func:`localization.workflows.navigation.evaluate_agents`), table in
@@ -37,6 +40,7 @@ import envs  # chooses MUJOCO_GL before mujoco is imported
 import gymnasium as gym
 
 from localization.localizer import MEASUREMENTS
+from localization.workflows.kidnap_demo import kidnap_demo
 from localization.workflows.navigation import EvalConfig, evaluate_agents
 from localization.workflows.plotting import plot_route, plot_track
 from localization.workflows.quality import quality_table
@@ -63,6 +67,8 @@ class DemoConfig:
     n_drive: int = field(default=1000, metadata={"help": "steps of each noise drive"})
     steps: int = field(default=1000, metadata={"help": "steps of each tracking run"})
     start: int = field(default=0, metadata={"help": "tracking start (route path point)"})
+    kidnap: bool = field(default=True, metadata={
+        "help": "the kidnapping stage: EKF and particle belief through one unannounced kidnap"})
     episodes: int = field(default=30, metadata={
         "help": "navigation episodes of the scripted agent per pose source (0: skip)"})
     out: str = field(default="results", metadata={"help": "output folder"})
@@ -129,6 +135,14 @@ def run_demo(args: DemoConfig) -> dict:
         print(f"[demo] {name}: RMSE {m['rmse']:.3f} m vs dead reckoning "
               f"{m['rmse_dead_reckoning']:.2f} m", flush=True)
     seconds["track"] = time.perf_counter() - t1
+    kidnap = {}
+    if args.kidnap:
+        t1 = time.perf_counter()
+        kidnap = kidnap_demo(env, loc, out, seed=args.seed + 11)
+        seconds["kidnap"] = time.perf_counter() - t1
+        print(f"[demo] kidnapped after {kidnap['kidnap_step']} steps; steps to recover: "
+              f"{kidnap['steps_to_recover']} (None: not within the drive); {kidnap['png']}",
+              flush=True)
     env.close()
     table = demo_table(rows)
     (out / "demo.md").write_text(table)
@@ -140,7 +154,7 @@ def run_demo(args: DemoConfig) -> dict:
     seconds["total"] = time.perf_counter() - t0
     summary = {"dataset": str(dataset), "route_png": str(figure), "frames": len(poses),
                "localizer": str(out / "localizer.npz"), "tracking": rows,
-               "navigation": navigation,
+               "navigation": navigation, "kidnap": kidnap,
                "control_gain": loc.control_gain_.tolist(),
                "consistency": {k: v.tolist() for k, v in loc.consistency_.items()},
                "quality": loc.quality_,

@@ -1,0 +1,24 @@
+"""The demo's kidnapping stage on the small shared localizer (city 0, 32 x 32)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from localization.workflows.kidnap_demo import kidnap_demo
+
+from ..conftest import make_env
+
+
+def test_kidnap_stage_writes_the_figure_and_measures_both_filters(localizer, tmp_path):
+    env = make_env()
+    try:
+        out = kidnap_demo(env, localizer, tmp_path, seed=3, steps_before=40, steps_after=60)
+    finally:
+        env.close()
+    assert (tmp_path / "kidnap.png").stat().st_size > 10_000
+    assert out["kidnap_step"] == 41
+    assert set(out["steps_to_recover"]) == {"ekf", "particles"}
+    for name, v in out["steps_to_recover"].items():
+        assert v is None or 0 <= v <= 60, (name, v)
+    # both filters start at the true pose and track the route lanes they were trained on
+    assert all(np.isfinite(r) and r < 1.0 for r in out["rmse_before"].values()), out
