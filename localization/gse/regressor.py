@@ -39,17 +39,16 @@ from localization.gse.graph import (
     knn_graph,
     local_pca,
     loop_coordinate,
-    same_side,
 )
 from localization.gse.io import load_regressor, save_regressor
 from localization.gse.jacobian_regression import (
     AGREEMENT_GRID,
     BANDWIDTH_GRID,
-    gaussian_jr,
     loo_bandwidth,
 )
 from localization.gse.pose_block import PoseBlockMixin
-from localization.gse.validation import check_2d, validate_X, validate_y
+from localization.gse.queries import GSEQueryMixin
+from localization.gse.validation import validate_X, validate_y
 
 __all__ = ["GSERegressor", "pinv_blocks"]
 
@@ -75,7 +74,7 @@ def pinv_blocks(H: Array, ridge: float = 0.0) -> Array:
         return np.linalg.pinv(H)
 
 
-class GSERegressor(PoseBlockMixin, RegressorMixin, BaseEstimator):
+class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator):
     """GSE regression between features w (n, m) and poses theta (n, d).
 
     Parameters
@@ -344,145 +343,6 @@ class GSERegressor(PoseBlockMixin, RegressorMixin, BaseEstimator):
         self._zv = np.ascontiguousarray(self.gse_.Z_[:, m:])
         self._zv_tree = cKDTree(self._zv)  # pose space is low-dimensional
         self.embedding_ = self.gse_.embedding_
-
-    # ----------------------------------------------------------------- predict
-    def _check_w(self, W: Array) -> Array:
-        check_is_fitted(self, "gse_")
-        return validate_X(self, W, "W", reset=False)
-
-    def _check_theta(self, Theta: Array) -> Array:
-        check_is_fitted(self, "gse_")
-        return check_2d(Theta, "Theta", len(self.theta_scale_))
-
-    def _flag(self, log_sum: Array, what: str, *outs: Array) -> None:
-        bad = log_sum < np.log(self.gse_.min_kernel_sum)
-        if bad.any() and self.out_of_domain != "ignore":
-            if self.out_of_domain == "raise":
-                raise ValueError(f"{bad.sum()} {what} row(s) are outside the training domain "
-                                 f"(kernel sum < {self.gse_.min_kernel_sum:g}), first row "
-                                 f"{int(np.flatnonzero(bad)[0])}")
-            for o in outs:
-                if o is not None:
-                    o[bad] = np.nan
-
-    def _mask(self, ind: Array) -> Array | None:
-        """Neighbours (n, k) on the nearest neighbour's side of every cut, or None."""
-        return None if self.cut_ is None else same_side(self.cut_[ind])
-
-    def _w_factor(self, Ws: Array, ind: Array) -> Array | None:
-        """log Binet-Cauchy factor of K_W (n, k), or None when kernel_grassmann is off."""
-        if not self.kernel_grassmann:
-            return None
-        d2 = ((Ws[:, None, :] - self._ws[ind]) ** 2).sum(axis=2)
-        L = local_pca(self._ws, Ws, ind, np.exp(-0.5 * d2 / self._pca_bw ** 2),
-                      self.embedding_.shape[1])
-        S = np.einsum("nma,nkmb->nkab", L, self._w_tangents[ind])
-        with np.errstate(divide="ignore"):
-            return np.log(np.linalg.det(S) ** 2)
-
-    def _r_star(self, W: Array, jacobian: bool) -> tuple[Array, Array | None]:
-        W = self._check_w(W)
-        Ws = (W - self.w_mean_) / self.w_scale_
-        if len(Ws) <= 32:  # single queries: a KD-tree beats a GEMM over all samples
-            ind = np.asarray(self._ws_tree.query(Ws, k=self.jr_neighbors_)[1]).reshape(len(Ws), -1)
-        else:
-            ind = brute_knn(self._ws, self._ws_sqn, Ws, self.jr_neighbors_)[1]
-        mask = self._mask(ind)
-        bw = self.bandwidth_w_ * self.w_radius_[ind] if self.adaptive_bandwidth else self.bandwidth_w_
-        r, J, log_sum = gaussian_jr(Ws[:, None, :] - self._ws[ind], self.embedding_[ind],
-                                    self.Gr_[ind], bw, mask, jacobian,
-                                    self._w_factor(Ws, ind), self.agreement_)
-        if J is not None:
-            J /= self.w_scale_
-        self._flag(log_sum, "W", r, J)
-        return r, J
-
-    def _R_star(self, Theta: Array, jacobian: bool) -> tuple[Array, Array | None]:
-        Theta = self._check_theta(Theta).copy()
-        for c in self._per:
-            Theta[:, c] = wrap_angle(Theta[:, c])
-        _, ind = self._zv_tree.query(self._lift(Theta), k=self.jr_neighbors_)
-        ind = np.asarray(ind).reshape(len(Theta), -1)
-        mask = self._mask(ind)
-        bw = (self.bandwidth_theta_ * self.theta_radius_[ind] if self.adaptive_bandwidth
-              else self.bandwidth_theta_)
-        R, J, log_sum = gaussian_jr(self._pose_diff(Theta, self.theta_[ind]), self.embedding_[ind],
-                                    self.GR_[ind], bw, mask, jacobian)
-        if J is not None:
-            J *= self.theta_scale_
-        self._flag(log_sum, "Theta", R, J)
-        return R, J
-
-    def embed(self, W: Array) -> Array:
-        """r*(w): representation of features, shape (n, q)."""
-        return self._r_star(W, False)[0]
-
-    def embed_jacobian(self, W: Array) -> Array:
-        """Exact d r*/dw in original feature units, shape (n, q, m)."""
-        return self._r_star(W, True)[1]
-
-    def embed_pose(self, Theta: Array) -> Array:
-        """R*(theta): representation of poses, shape (n, q)."""
-        return self._R_star(Theta, False)[0]
-
-    def embed_pose_jacobian(self, Theta: Array) -> Array:
-        """Exact d R*/dtheta (angles in radians), shape (n, q, d)."""
-        return self._R_star(Theta, True)[1]
-
-    def _recover(self, Y: Array, cols: slice, jacobian: bool = False
-                 ) -> tuple[Array, Array | None]:
-        """g(Y) on ambient columns ``cols``; rows of Y that are NaN (out of domain with
-        ``out_of_domain="nan"``) stay NaN instead of reaching the KD-tree."""
-        ok = np.all(np.isfinite(Y), axis=1)
-        if ok.all():
-            g, J, _ = self.gse_._recover(Y, cols, jacobian)
-            return g, J
-        p = len(range(*cols.indices(self.gse_.Z_.shape[1])))
-        g = np.full((len(Y), p), np.nan)
-        J = np.full((len(Y), p, Y.shape[1]), np.nan) if jacobian else None
-        if ok.any():
-            g[ok], Jok, _ = self.gse_._recover(Y[ok], cols, jacobian)
-            if J is not None:
-                J[ok] = Jok
-        return g, J
-
-    def predict(self, W: Array) -> Array:
-        """psi*(w) = g_v(r*(w)): poses (n, d) (or (n,) if fitted on a 1-D y), angles
-        wrapped to (-pi, pi]."""
-        r, _ = self._r_star(W, False)
-        zv, _ = self._recover(r, slice(len(self.w_mean_), None))
-        theta = self._unlift(zv)
-        return theta[:, 0] if getattr(self, "y_1d_", False) else theta
-
-    def predict_features(self, Theta: Array) -> Array:
-        """Phi*(theta) = g_u(R*(theta)): features (n, m) in original units."""
-        R, _ = self._R_star(Theta, False)
-        gu, _ = self._recover(R, slice(0, len(self.w_mean_)))
-        return gu * self.w_scale_ + self.w_mean_
-
-    def reconstruct(self, W: Array) -> Array:
-        """Reduce-then-recover ``g_u(r*(w))``: features (n, m) rebuilt from their
-        q-dimensional representation (the paper's Fig. 2), original units."""
-        r, _ = self._r_star(W, False)
-        gu, _, _ = self.gse_._recover(r, slice(0, len(self.w_mean_)))
-        return gu * self.w_scale_ + self.w_mean_
-
-    def feature_tangents(self, W: Array) -> Array:
-        """Tangent vectors of the feature manifold at ``g_u(r*(w))``: the feature block
-        ``G_u`` of the recovery Jacobian field (method §7.2), shape (n, m, q), original units
-        per unit of representation (the paper's Fig. 3)."""
-        r, _ = self._r_star(W, False)
-        out = np.full((len(r), len(self.w_mean_), r.shape[1]), np.nan)
-        ok = np.isfinite(r).all(axis=1)
-        if ok.any():
-            out[ok] = self.gse_.recovery_jacobian(r[ok])[:, :len(self.w_mean_), :]
-        return out * self.w_scale_
-
-    def features_jacobian(self, Theta: Array) -> Array:
-        """Exact dPhi*/dtheta (n, m, d) in original units (angles in radians): EKF's H."""
-        R, JR = self._R_star(Theta, True)
-        _, Jg = self._recover(R, slice(0, len(self.w_mean_)), jacobian=True)
-        return self.w_scale_ * (Jg @ JR)
 
     # --------------------------------------------------------------- persistence
     def save(self, path: str | Path) -> None:
