@@ -17,6 +17,7 @@ from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
 from envs.cameras import TopDownView, check_image_size, make_camera
+from envs.lookalike import LookalikeCity, generate_lookalike_city
 from envs.motion_model import UnicycleModel, wrap_angle
 from envs.robot import (
     ACTUATOR_XML,
@@ -37,7 +38,10 @@ from localization._validation import (
     check_seed,
 )
 
-__all__ = ["RESET_OPTIONS", "AppearanceNavEnv", "make_appearance_nav"]
+__all__ = ["CITY_LAYOUTS", "RESET_OPTIONS", "AppearanceNavEnv", "make_appearance_nav"]
+
+#: the values of ``city_layout``
+CITY_LAYOUTS = ("random", "lookalike")
 
 #: the keys ``reset(options=...)`` understands
 RESET_OPTIONS = ("pose", "goal")
@@ -68,6 +72,14 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         City layout in metres (default 20 x 20 m, 4 m blocks, 2 m streets).
     frame_skip : int
         Physics steps (0.01 s each) per env step; ``dt = 0.01 * frame_skip`` (default 0.1 s).
+    city_layout : {"random", "lookalike"}
+        "random" (default): every block drawn anew, with tall landmark towers.
+        "lookalike": every block the same block (:mod:`envs.lookalike`), except for
+        ``n_landmarks`` landmark buildings (same shape, a saturated colour), so single images
+        cannot tell twin places apart; twins differ by multiples of ``self.city.period``
+        along x and y, and ``info["twins"]`` lists the true pose's twins.
+    n_landmarks : int or None
+        Landmark buildings (default 3 for "random", 2 for "lookalike").
 
     Notes
     -----
@@ -79,7 +91,9 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
     Observation ``{"image": (H, W, 3) uint8, "goal": (2,) float32 world position}``.
     ``info``: ``pose`` [x, y, yaw] float64 (the true pose, never in the observation),
     ``collision`` (the robot touched a building or the city's invisible boundary wall
-    during the step), ``distance_to_goal`` (m), ``control`` (the clipped U applied).
+    during the step), ``distance_to_goal`` (m), ``control`` (the clipped U applied); with
+    ``city_layout="lookalike"`` also ``twins`` (m, 3): the true pose's twin poses in the city
+    (:meth:`envs.lookalike.LookalikeCity.twins`).
 
     Reward: decrease of the distance to the goal minus ``STEP_COST`` minus
     ``COLLISION_PENALTY`` on collision; terminated within ``GOAL_RADIUS`` of the goal.
@@ -107,6 +121,8 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         block_size: float = 4.0,
         street_width: float = 2.0,
         frame_skip: int = 10,
+        city_layout: str = "random",
+        n_landmarks: int | None = None,
     ) -> None:
         self.image_size = check_image_size(image_size)
         self.motion_noise = check_real(motion_noise, "motion_noise", low=0.0)
@@ -121,7 +137,11 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         self.max_episode_steps = max_episode_steps
         self.frame_skip = int(frame_skip)
 
-        self.city: City = generate_city(scene_seed, city_size, block_size, street_width)
+        self.city_layout = check_choice(city_layout, "city_layout", CITY_LAYOUTS)
+        if n_landmarks is not None:
+            n_landmarks = check_int(n_landmarks, "n_landmarks", low=0)
+        self.city: City = self._make_city(scene_seed, city_size, block_size, street_width,
+                                          n_landmarks)
         self.model = mujoco.MjModel.from_xml_string(self.city.to_mjcf(ROBOT_XML, "", ACTUATOR_XML, SENSOR_XML))
         self.city.paint_textures(self.model)
         self.data = mujoco.MjData(self.model)
@@ -145,6 +165,14 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         self._distance = 0.0
 
     # ------------------------------------------------------------------ setup
+    def _make_city(self, seed: int, size: float, block: float, street: float,
+                   n_landmarks: int | None) -> City:
+        if self.city_layout == "lookalike":
+            return generate_lookalike_city(seed, size, block, street,
+                                           n_landmarks=2 if n_landmarks is None else n_landmarks)
+        return generate_city(seed, size, block, street,
+                             n_landmarks=3 if n_landmarks is None else n_landmarks)
+
     def _init_ids(self) -> None:
         m = self.model
         self._root_qpos = m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "root")]
@@ -259,12 +287,15 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
     def _info(self, collision: bool, control: NDArray[np.float64], pose: NDArray[np.float64] | None = None
               ) -> dict[str, Any]:
         pose = self.pose if pose is None else pose
-        return {
+        info = {
             "pose": pose,
             "collision": bool(collision),
             "distance_to_goal": math.hypot(pose[0] - self._goal[0], pose[1] - self._goal[1]),
             "control": np.asarray(control, dtype=np.float64),
         }
+        if isinstance(self.city, LookalikeCity):
+            info["twins"] = self.city.twins(pose)
+        return info
 
     def _distance_to_goal(self) -> float:
         x, y, _ = self.pose

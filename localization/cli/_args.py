@@ -66,9 +66,9 @@ def add_dataclass_args(parser: argparse.ArgumentParser | Any, cls: type, prefix:
     for f in dataclasses.fields(cls):
         sub = _nested(f)
         if sub is not None:
-            group = parser.add_argument_group(
-                f"{f.name} options", f.metadata.get("help"))
-            add_dataclass_args(group, type(sub), f"{prefix}{f.name}_", sub)
+            name = f.name.rstrip("_")  # a keyword field (``global_``) gives ``--global-...``
+            group = parser.add_argument_group(f"{name} options", f.metadata.get("help"))
+            add_dataclass_args(group, type(sub), f"{prefix}{name}_", sub)
             continue
         if f.metadata.get("help", "").startswith("internal:"):
             continue  # set by the program itself, not a user option
@@ -91,7 +91,7 @@ def to_dataclass(cls: type[T], namespace: argparse.Namespace, prefix: str = "") 
     for f in dataclasses.fields(cls):
         sub = _nested(f)
         if sub is not None:
-            kwargs[f.name] = to_dataclass(type(sub), namespace, f"{prefix}{f.name}_")
+            kwargs[f.name] = to_dataclass(type(sub), namespace, f"{prefix}{f.name.rstrip('_')}_")
         elif prefix + f.name in values:
             kwargs[f.name] = values[prefix + f.name]
     return cls(**kwargs)

@@ -12,7 +12,9 @@ markdown table (``make bench`` runs them all).
 - filter: BeliefWrapper's per-step cost and closed-loop tracking accuracy
   (``<filter-out-dir>/bench_filter.json`` / ``.md``);
 - agents: PPO on the belief against PPO on the true pose, same budget (needs the localizer
-  ``make demo`` writes; ``<agents-out>/bench_agents.json`` / ``.md``).
+  ``make demo`` writes; ``<agents-out>/bench_agents.json`` / ``.md``);
+- global: kidnapping recovery, global start, the look-alike city, nominal tracking and cost
+  of the pose filters side by side (``<global-out-dir>/bench_global.json`` / ``.md``).
 
 Each benchmark's own options are ``--<benchmark>-<option>`` (listed below); they are checked
 for every benchmark chosen by ``--only`` before the first one starts.
@@ -42,7 +44,9 @@ from localization.workflows.benchmarks import BENCHMARKS, benchmark
 from localization.workflows.benchmarks.agents import AgentsBenchConfig
 from localization.workflows.benchmarks.env import EnvBenchConfig
 from localization.workflows.benchmarks.filter import FilterBenchConfig
+from localization.workflows.benchmarks.global_loc import GlobalBenchConfig
 from localization.workflows.benchmarks.gse import GSEBenchConfig
+from localization.workflows.kidnap_eval import FILTERS
 from localization.workflows.training import VEC_ENVS
 
 __all__ = ["Args", "check", "run"]
@@ -62,6 +66,8 @@ class Args:
         "help": "belief wrapper cost and tracking accuracy"})
     agents: AgentsBenchConfig = field(default_factory=AgentsBenchConfig, metadata={
         "help": "PPO on the belief vs on the true pose"})
+    global_: GlobalBenchConfig = field(default_factory=GlobalBenchConfig, metadata={
+        "help": "kidnapping, global start, look-alike city: the filters side by side"})
 
 
 def _check_env_bench(c: EnvBenchConfig) -> None:
@@ -102,14 +108,30 @@ def _check_agents_bench(c: AgentsBenchConfig) -> None:
     check_output_dir("agents_out", c.out)
 
 
+def _check_global_bench(c: GlobalBenchConfig) -> None:
+    check_int_list("global_cities", c.cities, minimum=0)
+    check_choices("global_filters", c.filters, FILTERS)
+    check_numbers(c, positive=("image_size", "n_train", "n_drive", "n_components", "n_kidnaps",
+                               "steps_before", "steps_after", "global_steps", "n_lookalike",
+                               "n_nominal", "nominal_steps"),
+                  non_negative=("lookalike_city", "motion_noise", "n_global", "seed"),
+                  prefix="global_")
+    check_output_dir("global_out_dir", c.out_dir)
+
+
 CHECKS = {"env": _check_env_bench, "gse": _check_gse_bench, "filter": _check_filter_bench,
-          "agents": _check_agents_bench}
+          "agents": _check_agents_bench, "global": _check_global_bench}
+
+
+def _config(args: Args, name: str) -> object:
+    """The settings field of benchmark ``name`` (``global`` is a keyword: the field is ``global_``)."""
+    return getattr(args, "global_" if name == "global" else name)
 
 
 def check(args: Args) -> None:
     """``--only`` names benchmarks, and their options are valid."""
     for name in check_choices("only", args.only, BENCHMARKS):
-        CHECKS[name](getattr(args, name))
+        CHECKS[name](_config(args, name))
 
 
 def run(args: Args) -> None:
@@ -119,4 +141,4 @@ def run(args: Args) -> None:
         if name in chosen:
             print(f"[bench] {name}", flush=True)
             _, run_one = benchmark(name)
-            run_one(dataclasses.replace(getattr(args, name)))
+            run_one(dataclasses.replace(_config(args, name)))

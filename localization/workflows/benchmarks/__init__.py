@@ -4,7 +4,9 @@ in one run, each writing JSON and a markdown table.
 - :mod:`.env`: env steps/s against a raw MuJoCo step+render loop;
 - :mod:`.gse`: GSE fit time, memory, query latency and accuracy against KNR and retrieval;
 - :mod:`.filter`: the belief wrapper's per-step cost and closed-loop tracking accuracy;
-- :mod:`.agents`: PPO on the belief against PPO on the true pose.
+- :mod:`.agents`: PPO on the belief against PPO on the true pose;
+- :mod:`.global_loc`: kidnapping, global start, the look-alike city, nominal tracking and
+  cost of every pose filter side by side.
 
 :data:`BENCHMARKS` maps each name to its module, settings class and run function; modules
 load on first use.
@@ -24,6 +26,7 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "gse": ("gse", "GSEBenchConfig", "run_gse_bench"),
     "filter": ("filter", "FilterBenchConfig", "run_filter_bench"),
     "agents": ("agents", "AgentsBenchConfig", "run_agents_bench"),
+    "global": ("global_loc", "GlobalBenchConfig", "run_global_bench"),
 }
 
 

@@ -1,0 +1,344 @@
+"""Benchmark of the beliefs that must notice they are lost (issue 12): kidnapping, global
+localization, the look-alike city, nominal tracking and cost, every filter side by side
+(``appearance-nav bench --only global``; its options are ``--global-<option>``).
+
+    appearance-nav bench --only global                    # the full run (about 20 minutes)
+    appearance-nav bench --only global --global-quick     # smoke run (under a minute)
+
+Cities: ``cities`` (default 21, 22, 23) and the look-alike city ``lookalike_city`` (24,
+``city_layout="lookalike"``) were never used to choose a default. On each, a street-wide
+PixelPCA localizer is fitted with :func:`~localization.workflows.tracking.fit_city_localizer`
+(the settings below); every filter of ``filters`` replays the same recorded drives
+(:mod:`localization.workflows.kidnap_eval`: the robot drives the streets on its true pose).
+
+Rows (recovered = position error < 0.5 m for 10 steps in a row):
+
+* kidnapping: ``n_kidnaps`` drives over the cities (kidnapped >= 5 m after
+  ``steps_before`` steps, ``steps_after`` more); recovery rate within 30 steps, median /
+  95th percentile of the steps to recover (inf = not within the drive); while lost
+  (error > 1 m after the kidnap), the share of steps where the status is one of
+  :data:`LOST_STATUSES` or the 3-sigma position ellipse (d^2 <= 9) contains the truth.
+  Targets: >= 95 % within 30 steps, median <= 10, admitted >= 90 %.
+* global: ``n_global`` drives started with no pose (filters with a global start only:
+  ``ParticleBelief.reset(mode="global")``); share localized within 30 steps. Target >= 95 %.
+* look-alike: ``n_lookalike`` kidnap drives in the look-alike city; the share of runs whose
+  belief sits on a wrong twin (within 1 m of a twin of the true pose, more than 1 m from
+  it) for more than 20 steps in a row. Target <= 5 %.
+* nominal: ``n_nominal`` drives of ``nominal_steps`` steps per city, no kidnap; position
+  RMSE (target for each filter: <= 1.2 x the EKF's) and mean NEES (3 dof; target: in the
+  95 % chi-square band of the mean over the drives).
+* cost: ms per filter step on one core (BLAS threads limited to 1), over the nominal drives;
+  target <= 20 ms with 2000 particles.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import platform
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
+
+# isort: split
+import gymnasium as gym
+import numpy as np
+from scipy.stats import chi2
+from threadpoolctl import threadpool_limits
+from tqdm import tqdm
+
+from localization.geometry import wrap_angle
+from localization.workflows import kidnap_eval as ke
+from localization.workflows.tracking import fit_city_localizer
+
+__all__ = ["LOST_STATUSES", "TARGETS", "GlobalBenchConfig", "run_global_bench"]
+
+#: statuses that admit the belief is lost (or re-localizing / torn between hypotheses)
+LOST_STATUSES = ("lost", "relocalizing", "ambiguous")
+LOST_ERROR = 1.0  # m
+TWIN_RADIUS = 1.0  # m
+WRONG_TWIN_STEPS = 20
+WITHIN = 30
+TARGETS = {"recovered_within_30": 0.95, "median_steps": 10.0, "admitted_while_lost": 0.90,
+           "global_within_30": 0.95, "wrong_twin_runs": 0.05, "rmse_ratio": 1.2,
+           "ms_per_step": 20.0}
+
+
+@dataclass
+class GlobalBenchConfig:
+    """Settings of the global-localization benchmark."""
+
+    cities: str = field(default="21,22,23", metadata={
+        "help": "comma-separated scene seeds (never used to choose a default)"})
+    lookalike_city: int = field(default=24, metadata={"help": "scene seed of the look-alike city"})
+    filters: str = field(default="ekf,particles", metadata={
+        "help": "comma-separated filters of kidnap_eval.run_filter, side by side"})
+    image_size: int = field(default=32, metadata={"help": "square image side (px)"})
+    motion_noise: float = field(default=0.05, metadata={"help": "env actuation noise"})
+    n_train: int = field(default=4000, metadata={"help": "street-lane training images per city"})
+    n_drive: int = field(default=600, metadata={"help": "steps of each noise-calibration drive"})
+    n_components: int = field(default=16, metadata={"help": "PixelPCA components"})
+    n_kidnaps: int = field(default=120, metadata={"help": "kidnap drives over all cities"})
+    steps_before: int = field(default=60, metadata={"help": "steps before each kidnap"})
+    steps_after: int = field(default=60, metadata={"help": "steps after each kidnap"})
+    n_global: int = field(default=30, metadata={"help": "global starts over all cities"})
+    global_steps: int = field(default=60, metadata={"help": "steps of each global-start drive"})
+    n_lookalike: int = field(default=30, metadata={"help": "kidnap drives in the look-alike city"})
+    n_nominal: int = field(default=2, metadata={"help": "nominal drives per city"})
+    nominal_steps: int = field(default=300, metadata={"help": "steps of each nominal drive"})
+    quick: bool = field(default=False, metadata={"help": "smoke run: one city, tiny fits"})
+    seed: int = field(default=0, metadata={"help": "seed of fits and drives"})
+    out_dir: str = field(default="results", metadata={"help": "where bench_global.json/.md go"})
+
+    def resolved(self) -> GlobalBenchConfig:
+        """The settings actually run (``quick``: one city, small fits, a few short drives)."""
+        if not self.quick:
+            return self
+        return dataclasses.replace(
+            self, cities=self.cities.split(",")[0], n_train=500, n_drive=200, n_components=8,
+            n_kidnaps=2, steps_before=20, steps_after=40, n_global=1, global_steps=40,
+            n_lookalike=1, n_nominal=1, nominal_steps=60)
+
+    def city_list(self) -> list[int]:
+        """``cities`` as ints."""
+        return [int(s) for s in self.cities.split(",")]
+
+    def filter_list(self) -> list[str]:
+        """``filters`` as names, each checked against :data:`kidnap_eval.FILTERS`."""
+        names = [s.strip() for s in self.filters.split(",")]
+        bad = [n for n in names if n not in ke.FILTERS]
+        if bad or not names:
+            raise ValueError(f"filters: unknown {bad}; choose from {list(ke.FILTERS)}")
+        return names
+
+
+# ---------------------------------------------------------------- per-drive scores
+def admitted(means: np.ndarray, covs: np.ndarray, statuses: list[str], poses: np.ndarray,
+             start: int) -> tuple[int, int]:
+    """(steps lost, steps of them admitted) from frame ``start``: lost = error > 1 m;
+    admitted = status in :data:`LOST_STATUSES` or the truth inside the 3-sigma ellipse."""
+    e = poses[start:, :2] - means[start:, :2]
+    lost = np.hypot(*e.T) > LOST_ERROR
+    P = covs[start:, :2, :2]
+    d2 = np.einsum("ni,ni->n", e, np.linalg.solve(P, e[..., None])[..., 0])
+    says = np.isin(np.asarray(statuses[start:]), LOST_STATUSES)
+    return int(lost.sum()), int((lost & (says | (d2 <= 9.0))).sum())
+
+
+def wrong_twin_run(means: np.ndarray, poses: np.ndarray, city: Any, start: int) -> int:
+    """Longest run of frames from ``start`` with the belief on a wrong twin of the truth."""
+    best = run = 0
+    for m, p in zip(means[start:], poses[start:]):
+        twins = p[:2] + city.twin_shifts(p[:2])
+        on_twin = len(twins) and np.min(np.hypot(*(twins - m[:2]).T)) < TWIN_RADIUS
+        run = run + 1 if on_twin and np.hypot(*(m[:2] - p[:2])) > LOST_ERROR else 0
+        best = max(best, run)
+    return best
+
+
+def nees(means: np.ndarray, covs: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """Per-frame NEES (n,) with the heading residual wrapped."""
+    e = poses - means
+    e[:, 2] = wrap_angle(e[:, 2])
+    return np.einsum("ni,ni->n", e, np.linalg.solve(covs, e[..., None])[..., 0])
+
+
+# ---------------------------------------------------------------- stages
+def make_env(args: GlobalBenchConfig, city: int, layout: str = "random") -> gym.Env:
+    return gym.make("AppearanceNav-v0", scene_seed=city, city_layout=layout,
+                    image_size=(args.image_size, args.image_size),
+                    motion_noise=args.motion_noise, max_episode_steps=None)
+
+
+def fit(env: gym.Env, args: GlobalBenchConfig) -> Any:
+    with warnings.catch_warnings():  # GSE's eigen-gap warning on a thin tube of poses
+        warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
+        loc, _ = fit_city_localizer(
+            env, n_train=args.n_train, lanes="streets", n_drive=args.n_drive, seed=args.seed,
+            localizer_params={"features_params": {"n_components": args.n_components}},
+            calibrate_on_belief=False, measurements=("representation",))
+    return loc
+
+
+def kidnaps(env: gym.Env, loc: Any, args: GlobalBenchConfig, n: int, seed: int,
+            bar: tqdm) -> dict[str, list[dict[str, Any]]]:
+    """Per filter, one record per kidnap drive: steps to recover, lost / admitted steps,
+    the longest wrong-twin run (look-alike cities)."""
+    mm, city = env.unwrapped.motion_model, env.unwrapped.city
+    out: dict[str, list[dict[str, Any]]] = {f: [] for f in args.filter_list()}
+    for k in range(n):
+        drive = ke.record_kidnap_drive(env, loc, args.steps_before, args.steps_after, seed + k)
+        for name, recs in out.items():
+            means, covs, statuses = ke.run_filter(name, drive, loc, mm, seed + k)
+            lost, said = admitted(means, covs, statuses, drive.poses, drive.kidnap)
+            rec = {"steps": ke.steps_to_recover(means, drive.poses, drive.kidnap),
+                   "lost_steps": lost, "admitted_steps": said}
+            if hasattr(city, "twin_shifts"):
+                rec["wrong_twin_run"] = wrong_twin_run(means, drive.poses, city, drive.kidnap)
+            recs.append(rec)
+        bar.update()
+    return out
+
+
+def nominal(env: gym.Env, loc: Any, args: GlobalBenchConfig, seed: int,
+            bar: tqdm) -> dict[str, list[dict[str, float]]]:
+    """Per filter, per nominal drive: squared errors, NEES and ms per step (one core)."""
+    mm = env.unwrapped.motion_model
+    out: dict[str, list[dict[str, float]]] = {f: [] for f in args.filter_list()}
+    for k in range(args.n_nominal):
+        drive = ke.record_kidnap_drive(env, loc, args.nominal_steps, 0, seed + k)
+        for name, recs in out.items():
+            with threadpool_limits(1):
+                t0 = time.perf_counter()
+                means, covs, _ = ke.run_filter(name, drive, loc, mm, seed + k)
+                ms = 1e3 * (time.perf_counter() - t0) / len(drive.controls)
+            err2 = np.sum((means[:, :2] - drive.poses[:, :2]) ** 2, axis=1)
+            recs.append({"sse": float(err2.sum()), "n": len(err2), "ms_per_step": ms,
+                              "nees_mean": float(np.mean(nees(means, covs, drive.poses)))})
+        bar.update()
+    return out
+
+
+# ---------------------------------------------------------------- summaries
+def _split(n: int, parts: int) -> list[int]:
+    return [n // parts + (i < n % parts) for i in range(parts)]
+
+
+def summarize_kidnaps(recs: list[dict[str, Any]]) -> dict[str, float]:
+    s = np.array([np.inf if r["steps"] is None else r["steps"] for r in recs], dtype=float)
+    lost = sum(r["lost_steps"] for r in recs)
+    out = {"n": len(recs), "recovered_within_30": float(np.mean(s <= WITHIN)),
+           "median_steps": float(np.median(s)) if len(s) else float("nan"),
+           "p95_steps": float(np.percentile(s, 95, method="higher")) if len(s) else float("nan"),
+           "lost_steps": int(lost),
+           "admitted_while_lost": sum(r["admitted_steps"] for r in recs) / lost if lost
+           else float("nan")}
+    if recs and "wrong_twin_run" in recs[0]:
+        out["wrong_twin_runs"] = float(np.mean([r["wrong_twin_run"] > WRONG_TWIN_STEPS
+                                                for r in recs]))
+    return out
+
+
+def summarize_nominal(recs: list[dict[str, float]]) -> dict[str, float]:
+    d = len(recs)
+    lo, hi = chi2.ppf([0.025, 0.975], 3 * d) / d
+    return {"drives": d, "rmse": float(np.sqrt(sum(r["sse"] for r in recs) /
+                                               sum(r["n"] for r in recs))),
+            "nees_mean": float(np.mean([r["nees_mean"] for r in recs])),
+            "nees_band": [float(lo), float(hi)],
+            "ms_per_step": float(np.mean([r["ms_per_step"] for r in recs]))}
+
+
+# ---------------------------------------------------------------- report
+def _pct(v: float) -> str:
+    return "n/a" if v is None or not np.isfinite(v) else f"{100 * v:.0f} %"
+
+
+def _num(v: float, fmt: str = ".1f") -> str:
+    return "n/a" if v is None else ("inf" if v == np.inf else format(v, fmt))
+
+
+def _mark(ok: bool | None) -> str:
+    return "" if ok is None else (" PASS" if ok else " MISS")
+
+
+def markdown(result: dict[str, Any]) -> str:
+    """The side-by-side table of ``result`` (rows = measures, columns = filters)."""
+    s, names = result["summary"], result["filters"]
+    ekf_rmse = s["ekf"]["nominal"]["rmse"] if "ekf" in s else None
+    rows: list[tuple[str, str, list[str]]] = []
+
+    def row(label: str, target: str, cell: Any) -> None:
+        rows.append((label, target, [cell(s[n], n) for n in names]))
+
+    k = lambda f: f["kidnap"]
+    row(f"kidnap: recovered within 30 steps (n = {s[names[0]]['kidnap']['n']})", ">= 95 %",
+        lambda f, n: _pct(k(f)["recovered_within_30"]) + _mark(k(f)["recovered_within_30"] >= 0.95))
+    row("kidnap: median / p95 steps to recover", "median <= 10",
+        lambda f, n: f"{_num(k(f)['median_steps'], '.0f')} / {_num(k(f)['p95_steps'], '.0f')}"
+        + _mark(k(f)["median_steps"] <= 10))
+    row("kidnap: while lost (> 1 m), status lost or truth in 3-sigma", ">= 90 %",
+        lambda f, n: f"{_pct(k(f)['admitted_while_lost'])} of {k(f)['lost_steps']}"
+        + _mark(None if not k(f)["lost_steps"] else k(f)["admitted_while_lost"] >= 0.9))
+    row("global start: localized within 30 steps", ">= 95 %",
+        lambda f, n: "n/a" if f["global"] is None else
+        f"{_pct(f['global']['recovered_within_30'])} of {f['global']['n']}"
+        + _mark(f["global"]["recovered_within_30"] >= 0.95))
+    row(f"look-alike city {result['args']['lookalike_city']}: runs on a wrong twin > 20 steps",
+        "<= 5 %", lambda f, n: f"{_pct(f['lookalike']['wrong_twin_runs'])} of "
+        f"{f['lookalike']['n']}" + _mark(f["lookalike"]["wrong_twin_runs"] <= 0.05))
+    row("look-alike city: recovered within 30 steps", "",
+        lambda f, n: _pct(f["lookalike"]["recovered_within_30"]))
+    row("nominal: position RMSE (m)", "<= 1.2 x EKF",
+        lambda f, n: f"{f['nominal']['rmse']:.3f}" + ("" if ekf_rmse is None or n == "ekf" else
+                                                      _mark(f["nominal"]["rmse"] <= 1.2 * ekf_rmse)))
+    row("nominal: mean NEES (3 dof)", "in band",
+        lambda f, n: f"{f['nominal']['nees_mean']:.2f} [{f['nominal']['nees_band'][0]:.2f}, "
+        f"{f['nominal']['nees_band'][1]:.2f}]" + _mark(
+            f["nominal"]["nees_band"][0] <= f["nominal"]["nees_mean"] <= f["nominal"]["nees_band"][1]))
+    row("cost: ms per step (one core)", "<= 20",
+        lambda f, n: f"{f['nominal']['ms_per_step']:.1f}" + _mark(f["nominal"]["ms_per_step"] <= 20))
+    lines = [f"Global localization ({result['setup']}):", "",
+             "| measure | target | " + " | ".join(names) + " |",
+             "|---|---|" + "---:|" * len(names)]
+    lines += [f"| {label} | {target} | " + " | ".join(cells) + " |" for label, target, cells in rows]
+    return "\n".join(lines) + "\n"
+
+
+def run_global_bench(args: GlobalBenchConfig) -> dict[str, Any]:
+    """Run the benchmark; write ``bench_global.json`` / ``.md``; return the result."""
+    args = args.resolved()
+    cities, names = args.city_list(), args.filter_list()
+    out = Path(args.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    kid: dict[str, list] = {n: [] for n in names}
+    nom: dict[str, list] = {n: [] for n in names}
+    glob: list = []
+    work = args.n_kidnaps + args.n_nominal * len(cities) + args.n_lookalike
+    with tqdm(total=work, desc="bench global", leave=False) as bar:
+        for i, (city, n_kid, n_glob) in enumerate(zip(cities, _split(args.n_kidnaps, len(cities)),
+                                                       _split(args.n_global, len(cities)))):
+            env = make_env(args, city)
+            loc = fit(env, args)
+            base = args.seed + 10_000 * (i + 1)
+            for n, recs in kidnaps(env, loc, args, n_kid, base, bar).items():
+                kid[n] += recs
+            for n, recs in nominal(env, loc, args, base + 5_000, bar).items():
+                nom[n] += recs
+            if "particles" in names and n_glob:
+                g = ke.evaluate_global(env, loc, n_glob, args.global_steps, base + 7_000, WITHIN)
+                glob += g["steps"]
+            env.close()
+        env = make_env(args, args.lookalike_city, "lookalike")
+        loc = fit(env, args)
+        look = kidnaps(env, loc, args, args.n_lookalike, args.seed + 90_000, bar)
+        env.close()
+    g_steps = np.array([np.inf if k is None else k for k in glob], dtype=float)
+    summary = {n: {"kidnap": summarize_kidnaps(kid[n]), "nominal": summarize_nominal(nom[n]),
+                   "lookalike": summarize_kidnaps(look[n]),
+                   "global": None if n != "particles" or not glob else
+                   {"n": len(glob), "recovered_within_30": float(np.mean(g_steps <= WITHIN)),
+                    "median_steps": float(np.median(g_steps))}} for n in names}
+    result = {"args": dataclasses.asdict(args), "machine": platform.platform(),
+              "seconds": time.perf_counter() - t0, "filters": names, "targets": TARGETS,
+              "summary": summary, "kidnap_runs": kid, "lookalike_runs": look,
+              "nominal_runs": nom, "global_steps": glob,
+              "setup": f"cities {args.cities}, look-alike city {args.lookalike_city}, "
+                       f"{args.image_size}x{args.image_size} images, motion noise "
+                       f"{args.motion_noise}, PixelPCA({args.n_components}) on {args.n_train} "
+                       f"street images per city"}
+    (out / "bench_global.json").write_text(json.dumps(result, indent=2, default=_json))
+    (out / "bench_global.md").write_text(markdown(result))
+    print(markdown(result))
+    return result
+
+
+def _json(v: Any) -> Any:
+    if isinstance(v, np.generic):
+        return v.item()
+    raise TypeError(f"not JSON serialisable: {type(v).__name__}")
