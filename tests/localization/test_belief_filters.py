@@ -8,9 +8,6 @@ were chosen on city 0).
 
 from __future__ import annotations
 
-import warnings
-
-import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -20,7 +17,7 @@ from localization.filtering.divergence import BELIEF_STATUSES
 from localization.filtering.free_space import city_sampler
 from localization.wrappers import BeliefWrapper
 
-from .conftest import ignore_gse_warnings, make_env
+from .conftest import held_out_localizer, make_env
 from .test_wrappers import start_pose
 
 PF = {"n_particles": 300}
@@ -106,14 +103,7 @@ HELD_OUT = 13
 
 @pytest.fixture(scope="module")
 def held_out():
-    from localization.workflows.tracking import fit_city_localizer
-    env = gym.make("AppearanceNav-v0", scene_seed=HELD_OUT, image_size=(32, 32),
-                   motion_noise=0.05, max_episode_steps=None)
-    with warnings.catch_warnings():
-        ignore_gse_warnings()
-        loc, _ = fit_city_localizer(env, n_train=3000, lanes="streets", n_drive=300, seed=0,
-                                    localizer_params={"features_params": {"n_components": 16}},
-                                    calibrate_on_belief=False, measurements=("representation",))
+    env, loc = held_out_localizer(HELD_OUT)
     yield env, loc
     env.close()
 

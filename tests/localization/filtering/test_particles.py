@@ -6,9 +6,6 @@ recovery tests fit a street-wide one on city 11 (never used to choose any defaul
 
 from __future__ import annotations
 
-import warnings
-
-import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -19,7 +16,7 @@ from localization.filtering.particle_motion import is_unicycle, predict_particle
 from localization.filtering.particles import ParticleBelief
 from localization.geometry import wrap_angle
 
-from ..conftest import ignore_gse_warnings
+from ..conftest import held_out_localizer
 
 DT = 0.1
 
@@ -214,16 +211,7 @@ RECOVERY_BOUND = 30  # steps; measured (20 kidnaps, this localizer): median 6, 1
 
 @pytest.fixture(scope="module")
 def held_out():
-    """A street-wide localizer on city 11: 32 x 32 images, 3000 lane images, a 300-step
-    noise drive (about 20 s)."""
-    from localization.workflows.tracking import fit_city_localizer
-    env = gym.make("AppearanceNav-v0", scene_seed=HELD_OUT, image_size=(32, 32),
-                   motion_noise=0.05, max_episode_steps=None)
-    with warnings.catch_warnings():
-        ignore_gse_warnings()
-        loc, _ = fit_city_localizer(env, n_train=3000, lanes="streets", n_drive=300, seed=0,
-                                    localizer_params={"features_params": {"n_components": 16}},
-                                    calibrate_on_belief=False, measurements=("representation",))
+    env, loc = held_out_localizer(HELD_OUT)
     yield env, loc
     env.close()
 
