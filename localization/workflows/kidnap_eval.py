@@ -114,16 +114,25 @@ def record_kidnap_drive(env: gym.Env, localizer: Any, steps_before: int, steps_a
 def run_filter(name: str, drive: KidnapDrive, localizer: Any, motion_model: Any,
                seed: int = 0, **options: Any) -> tuple[Array, Array, list[str]]:
     """Replay ``drive`` through filter ``name`` (one of ``FILTERS``) started at the true
-    start pose; ``options`` go to its constructor. Returns means, covs, statuses."""
+    start pose; ``options`` go to its constructor. Returns means, covs and the belief's
+    statuses ("tracking", "ambiguous", "relocalizing", "lost", ...: what the wrapper reports
+    as ``info["belief_status"]``; for the EKF not its measurement statuses)."""
     if name not in FILTERS:
         raise ValueError(f"unknown filter {name!r}; choose one of {FILTERS}")
     P0 = np.diag([0.01, 0.01, 0.001])
-    if name in ("ekf", "ekf_detect"):
-        options = {"detect_divergence": name == "ekf_detect", **options}
-        f: Any = BeliefFilter(localizer, motion_model, **options)
-    else:
+    if name not in ("ekf", "ekf_detect"):
         f = ParticleBelief(localizer, motion_model, seed=seed, **options)
-    return f.run(drive.W, drive.controls, x0=drive.poses[0], P0=P0)
+        return f.run(drive.W, drive.controls, x0=drive.poses[0], P0=P0)
+    options = {"detect_divergence": name == "ekf_detect", **options}
+    ekf = BeliefFilter(localizer, motion_model, **options)
+    ekf.reset(drive.W[0], drive.poses[0], P0)
+    means, covs, statuses = [ekf.x], [ekf.P], [ekf.belief_status]
+    for u, w in zip(drive.controls, drive.W[1:]):
+        ekf.step(u, w)
+        means.append(ekf.x)
+        covs.append(ekf.P)
+        statuses.append(ekf.belief_status)
+    return np.array(means), np.array(covs), statuses
 
 
 def steps_to_recover(means: Array, poses: Array, start: int) -> int | None:
