@@ -241,16 +241,21 @@ class AppearanceLocalizer(NoiseModelMixin, MapMixin):
     def _crop(self, images: NDArray[np.uint8]) -> NDArray[np.uint8]:
         return np.ascontiguousarray(images[:, self._row_slice(images.shape[1])])
 
-    def _to_model(self, poses: ArrayLike) -> Array:
-        """World poses -> the regressor's poses (heading rotated so the cut is at +-pi)."""
+    def to_model(self, poses: ArrayLike) -> Array:
+        """World poses (n, 3) -> the regressor's poses (n, 3): the heading rotated so that
+        GSE's cut of the circle (``yaw_cut_``) lies at +-pi (docs/method.md §10)."""
         out = np.array(poses, dtype=np.float64, copy=True).reshape(-1, 3)
         out[:, 2] = wrap_angle(out[:, 2] - self.yaw_cut_ + np.pi)
         return out
 
-    def _from_model(self, theta: ArrayLike) -> Array:
+    def from_model(self, theta: ArrayLike) -> Array:
+        """Inverse of :meth:`to_model`: the regressor's poses (n, 3) -> world poses (n, 3)."""
         out = np.array(theta, dtype=np.float64, copy=True).reshape(-1, 3)
         out[:, 2] = wrap_angle(out[:, 2] + self.yaw_cut_ - np.pi)
         return out
+
+    _to_model = to_model
+    _from_model = from_model
 
     def _new_regressor(self) -> GSERegressor:
         params = {**REGRESSOR_DEFAULTS, **(self.regressor_params or {}), "periodic": (2,),

@@ -181,7 +181,7 @@ class ParticleBelief:
                                          is None else proposal_noise, dtype=np.float64)
         if self.proposal_noise.shape != (3, 3):
             raise ValueError(f"proposal_noise must be (3, 3), got {self.proposal_noise.shape}")
-        self._train_poses = localizer._from_model(reg.theta_)
+        self._train_poses = localizer.from_model(reg.theta_)
         self._retrieval = NearestNeighbors(n_neighbors=min(int(n_neighbors), len(reg.theta_)))
         self._retrieval.fit(reg.gse_.Z_[:, :self._m])  # standardised training features
         self.rng = np.random.default_rng(seed)
@@ -325,13 +325,13 @@ class ParticleBelief:
         X = self.particles if X is None else np.asarray(X, dtype=np.float64)
         z = loc.measure(w, self.measurement) if z is None else z
         if self.measurement == "features":
-            e = z - reg.predict_features(loc._to_model(X))
+            e = z - reg.predict_features(loc.to_model(X))
             return np.einsum("ni,ij,nj->n", e, self._R_inv, e)
         if self.measurement == "pose":
             e = z[None] - X
         else:
             r = z
-            Rstar, H = reg._R_star(loc._to_model(X), True)  # R* and dR*/dtheta in one query
+            Rstar, H = reg.embed_pose_with_jacobian(loc.to_model(X))
             e = np.full_like(X, np.nan)
             ok = np.all(np.isfinite(H), axis=(1, 2)) & np.all(np.isfinite(r))
             ok[ok] &= np.abs(np.linalg.det(H[ok])) > 1e-12

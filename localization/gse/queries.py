@@ -111,6 +111,12 @@ class GSEQueryMixin:
         """Exact d R*/dtheta (angles in radians), shape (n, q, d)."""
         return self._R_star(Theta, True)[1]
 
+    def embed_pose_with_jacobian(self, Theta: Array) -> tuple[Array, Array]:
+        """R*(theta) (n, q) and d R*/dtheta (n, q, d) from one neighbour query (a particle
+        filter's likelihood and its linearisation at every particle)."""
+        R, J = self._R_star(Theta, True)
+        return R, J
+
     def _recover(self, Y: Array, cols: slice, jacobian: bool = False
                  ) -> tuple[Array, Array | None]:
         """g(Y) on ambient columns ``cols``; rows of Y that are NaN (out of domain with
