@@ -154,7 +154,12 @@ def fit_city_noise(env: gym.Env, localizer: AppearanceLocalizer, lanes: str = "r
     streets = lanes == "streets"
     drive = drive_streets if streets else drive_route
     images, poses, controls = drive(env, n_drive, seed=seed + 1, progress=progress)
-    localizer.fit_noise(motion_model, images, poses, controls)
+    try:
+        localizer.fit_noise(motion_model, images, poses, controls)
+    except ValueError as err:  # too few (finite) residuals for a covariance or its time
+        raise ValueError(f"n_drive={n_drive} is too short a drive for the noise model: {err}; "
+                         "raise n_drive or lower the feature dimension "
+                         "(features_params n_components)") from err
     localizer.calibrate(motion_model, images, poses, controls, measurements)
     if calibrate_on_belief:
         track = track_streets if streets else track_route
