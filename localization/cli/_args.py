@@ -133,13 +133,13 @@ def check_numbers(args: Any, positive: Iterable[str] = (), non_negative: Iterabl
 def check_env(args: Any, prefix: str = "") -> None:
     """The env options a command has among ``scene_seed`` (>= 0), ``camera`` (registered),
     ``image_size`` (> 0) and ``motion_noise`` (>= 0)."""
-    import envs
+    from localization.workflows.sim import CAMERAS
 
     names = {f.name for f in dataclasses.fields(args)}
     check_numbers(args, positive=sorted(names & {"image_size"}),
                   non_negative=sorted(names & {"scene_seed", "motion_noise"}), prefix=prefix)
     if "camera" in names:
-        check_choice(prefix + "camera", args.camera, sorted(envs.CAMERAS))
+        check_choice(prefix + "camera", args.camera, sorted(CAMERAS))
 
 
 def check_choice(option: str, value: str, choices: Iterable[str]) -> None:

@@ -26,7 +26,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
+import localization.workflows.sim  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
 
 # isort: split
 from localization.cli._args import (

@@ -10,9 +10,9 @@ The file holds ``images`` (n, H, W, 3) uint8, ``poses`` (n, 3) float64 ``[x, y, 
 from __future__ import annotations
 
 # isort: split
-from envs.datasets import MODES
 from localization.cli._args import check_choice, check_env, check_numbers, check_output_file
 from localization.workflows.collect import CollectConfig, collect_out_path, collect_to_file
+from localization.workflows.sim import MODES
 
 __all__ = ["Args", "check", "run"]
 

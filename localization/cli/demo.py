@@ -13,9 +13,9 @@ pose source: ``<out>/demo_agents/agents.md``. Everything also in ``<out>/demo.js
 from __future__ import annotations
 
 # isort: split
-from envs.lanes import LANE_SETS
 from localization.cli._args import check_choice, check_env, check_numbers, check_output_dir
 from localization.workflows.demo import DemoConfig, run_demo
+from localization.workflows.sim import LANE_SETS
 
 __all__ = ["Args", "check", "run"]
 

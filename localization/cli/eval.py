@@ -13,7 +13,7 @@ belief from images, dead_reckoning = the motion model alone), the same ``episode
 
 from __future__ import annotations
 
-import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
+import localization.workflows.sim  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
 
 # isort: split
 from agents.sources import POSE_SOURCES, STARTS

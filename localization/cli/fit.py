@@ -107,7 +107,7 @@ def fit_recorded(args: Args, out: Path) -> None:
 
 def fit_city(args: Args, out: Path) -> None:
     """Fit on the simulated city of ``args`` and save to ``out``."""
-    import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
+    import localization.workflows.sim  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
 
     # isort: split
     import gymnasium as gym

@@ -12,7 +12,7 @@ retrieval for every feature extractor; the random 3-DoF table adds the heading R
 
 from __future__ import annotations
 
-import envs  # chooses MUJOCO_GL before mujoco is imported
+import localization.workflows.sim  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
 
 # isort: split
 from localization.cli._args import (
@@ -24,6 +24,7 @@ from localization.cli._args import (
 )
 from localization.workflows.extractors import EXTRACTORS
 from localization.workflows.paper import PaperConfig, run_paper
+from localization.workflows.sim import CAMERAS
 
 __all__ = ["Args", "check", "run"]
 
@@ -35,7 +36,7 @@ MIN_IMAGES = 100
 
 def check(args: Args) -> None:
     """Every option is valid (raises :class:`~localization.cli._args.UsageError`)."""
-    check_choices("cameras", args.cameras, sorted(envs.CAMERAS))
+    check_choices("cameras", args.cameras, sorted(CAMERAS))
     check_env(args)
     check_numbers(args, positive=("n", "n_components", "figure_components", "ground_range",
                                   "intrinsic_samples", "num_threads"),

@@ -13,10 +13,9 @@ mean NEES and its chi-square band over the runs, NIS, acceptance, time per step)
 
 from __future__ import annotations
 
-import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
+import localization.workflows.sim  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
 
 # isort: split
-from envs.lanes import LANE_SETS
 from localization.cli._args import (
     check_choice,
     check_choices,
@@ -27,6 +26,7 @@ from localization.cli._args import (
     check_output_dir,
 )
 from localization.localizer import MEASUREMENTS
+from localization.workflows.sim import LANE_SETS
 from localization.workflows.track_runs import TrackConfig, run_tracking
 
 __all__ = ["Args", "check", "run"]
