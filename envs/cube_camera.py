@@ -25,16 +25,8 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from envs.projections import (
-    FACE_AXES,
-    PROJECTIONS,
-    CubeLUT,
-    build_lut,
-    fisheye_focal,
-    image_shape,
-    projection_directions,
-    remap,
-)
+from envs.cube_atlas import FACE_AXES, CubeLUT, build_lut, image_shape, remap
+from envs.projections import PROJECTIONS, fisheye_focal, projection_directions
 
 _KWARGS = {"fisheye": ("fov",), "catadioptric": ("elevation_range", "radii")}
 _GRID = (2, 3)  # atlas of faces: 2 rows x 3 columns (fits the default 640 x 480 buffer)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from envs import cube_atlas as A
 from envs import projections as P
 
 
@@ -21,9 +22,9 @@ def _centre_offsets(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
 
 # ----------------------------------------------------------------------------- cube faces
 def test_face_axes_are_right_handed_opengl_frames() -> None:
-    for fwd, right, up in P.FACE_AXES:
+    for fwd, right, up in A.FACE_AXES:
         np.testing.assert_allclose(np.cross(fwd, up), right)  # right = forward x up
-    np.testing.assert_allclose(np.abs(P.FACE_AXES[:, 0]).sum(0), [2, 2, 2])  # +-x, +-y, +-z
+    np.testing.assert_allclose(np.abs(A.FACE_AXES[:, 0]).sum(0), [2, 2, 2])  # +-x, +-y, +-z
 
 
 @pytest.mark.parametrize(
@@ -32,18 +33,18 @@ def test_face_axes_are_right_handed_opengl_frames() -> None:
      ((0.5, 0.25, -1), 5, 0.5, 0.25), ((-1, 0.5, 0.2), 1, -0.2, 0.5)],
 )  # fmt: skip
 def test_cube_face_lookup_known_directions(d, face, a, b) -> None:
-    k, fa, fb = P.cube_face_lookup(np.array(d, float))
+    k, fa, fb = A.cube_face_lookup(np.array(d, float))
     assert int(k) == face and fa == pytest.approx(a) and fb == pytest.approx(b)
 
 
 @pytest.mark.parametrize("pad", [0, 1, 2])
 def test_cube_face_pixel_centres_round_trip(pad: int) -> None:
     f = 7
-    dirs = P.cube_face_directions(f, pad)
+    dirs = A.cube_face_directions(f, pad)
     assert dirs.shape == (6, f + 2 * pad, f + 2 * pad, 3)
     np.testing.assert_allclose(np.linalg.norm(dirs, axis=-1), 1.0)
     inner = dirs[:, pad : pad + f, pad : pad + f]  # padded pixels belong to neighbouring faces
-    face, row, col = P.cube_face_pixel(inner, f, pad)
+    face, row, col = A.cube_face_pixel(inner, f, pad)
     k, i, j = np.meshgrid(np.arange(6), np.arange(f) + pad, np.arange(f) + pad, indexing="ij")
     np.testing.assert_array_equal(face, k)
     np.testing.assert_allclose(row, i, atol=1e-9)
@@ -53,8 +54,8 @@ def test_cube_face_pixel_centres_round_trip(pad: int) -> None:
 def test_atlas_places_faces_on_the_grid() -> None:
     f, pad = 5, 1
     g = f + 2 * pad
-    atlas = P.atlas_directions(f, pad, grid=(2, 3))
-    faces = P.cube_face_directions(f, pad)
+    atlas = A.atlas_directions(f, pad, grid=(2, 3))
+    faces = A.cube_face_directions(f, pad)
     assert atlas.shape == (2 * g, 3 * g, 3)
     np.testing.assert_array_equal(atlas[g : 2 * g, 2 * g :], faces[5])  # face 5: row 1, col 2
 
@@ -134,7 +135,7 @@ def test_catadioptric_round_trip_and_annulus_mask() -> None:
 # ----------------------------------------------------------------------------- LUT + remap
 def _colour_atlas(face_size: int, pad: int = 1) -> np.ndarray:
     """A cube atlas whose colour encodes the direction: rgb = 127.5 (1 + d)."""
-    return np.rint(127.5 * (1.0 + P.atlas_directions(face_size, pad))).astype(np.uint8)
+    return np.rint(127.5 * (1.0 + A.atlas_directions(face_size, pad))).astype(np.uint8)
 
 
 def _decode(img: np.ndarray) -> np.ndarray:
@@ -147,8 +148,8 @@ def _decode(img: np.ndarray) -> np.ndarray:
 )
 def test_remap_is_continuous_across_seams_and_decodes_directions(projection, kw, face_size) -> None:
     dirs, valid = P.projection_directions(projection, 64, **kw)
-    lut = P.build_lut(dirs, face_size, valid)
-    img = P.remap(_colour_atlas(face_size), lut)
+    lut = A.build_lut(dirs, face_size, valid)
+    img = A.remap(_colour_atlas(face_size), lut)
     assert img.shape == (64, 64, 3) and img.dtype == np.uint8
     assert not img[~valid].any()  # black outside the disc / annulus
     # the colour decodes back to the pixel's own direction
@@ -172,9 +173,9 @@ def test_remap_is_continuous_across_seams_and_decodes_directions(projection, kw,
 def test_nearest_lut_samples_the_containing_face_pixel() -> None:
     f = 16
     dirs, valid = P.fisheye_directions(48, 190.0)
-    lut = P.build_lut(dirs, f, valid, pad=0, bilinear=False)
+    lut = A.build_lut(dirs, f, valid, pad=0, bilinear=False)
     assert lut.index.shape == (1, 48, 48) and lut.buffer_shape == (2 * f, 3 * f, 3)
-    img = P.remap(_colour_atlas(f, pad=0), lut)
+    img = A.remap(_colour_atlas(f, pad=0), lut)
     assert not img[~valid].any()
     # within half a face-pixel diagonal: atan(sqrt(2) / F) at most
     err = _angle_deg(_decode(img)[valid], dirs[valid])
@@ -183,7 +184,7 @@ def test_nearest_lut_samples_the_containing_face_pixel() -> None:
 
 def test_bilinear_weights_sum_to_one_inside_mask() -> None:
     dirs, valid = P.catadioptric_directions(32)
-    lut = P.build_lut(dirs, 20, valid)
+    lut = A.build_lut(dirs, 20, valid)
     s = lut.weight[..., 0].sum(0)
     np.testing.assert_allclose(s[valid], 1.0, atol=1e-6)
     np.testing.assert_array_equal(s[~valid], 0.0)
@@ -204,11 +205,11 @@ def test_validation_errors() -> None:
         P.catadioptric_directions(32, radii=(0.5, 0.2))
     dirs, valid = P.fisheye_directions(16)
     with pytest.raises(ValueError, match="pad"):
-        P.build_lut(dirs, 8, valid, pad=0)
+        A.build_lut(dirs, 8, valid, pad=0)
     with pytest.raises(ValueError, match="shape"):
-        P.build_lut(dirs[0], 8)
-    lut = P.build_lut(dirs, 8, valid)
+        A.build_lut(dirs[0], 8)
+    lut = A.build_lut(dirs, 8, valid)
     with pytest.raises(ValueError, match="cube buffer"):
-        P.remap(np.zeros((10, 30, 3), np.uint8), lut)
+        A.remap(np.zeros((10, 30, 3), np.uint8), lut)
     with pytest.raises(ValueError, match="NaN"):
         P.fisheye_project(np.array([np.nan, 0, -1]), 16)
