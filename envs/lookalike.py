@@ -27,7 +27,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from envs.scene import _LANDMARK_COLOURS, Building, City, _block_buildings, _fmt, _street_centers
+from envs.city_model import _fmt
+from envs.scene import _LANDMARK_COLOURS, Building, City, _block_buildings, _street_centers
 from localization._validation import check_array, check_int, check_real, check_seed
 
 __all__ = ["SKY_RGB", "LookalikeCity", "generate_lookalike_city"]
