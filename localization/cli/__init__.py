@@ -66,14 +66,12 @@ def main(argv: list[str] | None = None) -> int:
             mod.check(args)
     except UsageError as err:
         _subparser(parser, ns.command).error(str(err))
+    sub = _subparser(parser, ns.command)
     try:
         mod.run(args)
-    except (ValueError, OSError) as err:
-        # a bad option found by run (it names the option: a usage error, exit 2) or a bad
-        # file or value met while working (exit 1): one line, never a traceback
-        sub = _subparser(parser, ns.command)
-        if str(err).startswith("--"):
-            sub.error(str(err))
+    except UsageError as err:  # an option found bad once the work has read its data
+        sub.error(str(err))
+    except (ValueError, OSError) as err:  # a bad file or value met while working
         sub.exit(1, f"{sub.prog}: error: {err}\n")
     return 0
 

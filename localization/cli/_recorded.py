@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from localization.cli._args import UsageError
 from localization.recorded import MATCHES, Recording, load_recorded
 
 
@@ -19,8 +20,8 @@ def parse_size(text: str, option: str = "--resize") -> tuple[int, int] | None:
     if len(size) == 1:
         size = size * 2
     if len(size) != 2 or min(size) < 1:
-        raise ValueError(f"{option} must be HEIGHTxWIDTH (e.g. 48x64) or one positive integer, "
-                         f"got {text!r}")
+        raise UsageError(option, f"must be HEIGHTxWIDTH (e.g. 48x64) or one positive integer, "
+                                 f"got {text!r}")
     return size  # type: ignore[return-value]
 
 
@@ -28,19 +29,19 @@ def check_data_options(data: str, pose_file: str, match: str, resize: str
                        ) -> tuple[Path, Path | None, tuple[int, int] | None]:
     """Validate ``--data``, ``--pose-file``, ``--match`` and ``--resize`` (no file is read)."""
     if not data:
-        raise ValueError("--data is required: a folder of images with a TUM pose file, or a .npz")
+        raise UsageError("data", "is required: a folder of images with a TUM pose file, or a .npz")
     path = Path(data)
     if not path.exists():
-        raise FileNotFoundError(f"--data: no folder or file at {path}")
+        raise UsageError("data", f"no folder or file at {path}")
     if path.is_file() and path.suffix != ".npz":
-        raise ValueError(f"--data: {path} must be a folder of images or a .npz dataset")
+        raise UsageError("data", f"{path} must be a folder of images or a .npz dataset")
     if pose_file and not Path(pose_file).is_file():
-        raise FileNotFoundError(f"--pose-file: no file at {pose_file}")
+        raise UsageError("pose-file", f"no file at {pose_file}")
     if match not in MATCHES:
-        raise ValueError(f"--match must be one of {', '.join(MATCHES)}, got {match!r}")
+        raise UsageError("match", f"must be one of {', '.join(MATCHES)}, got {match!r}")
     size = parse_size(resize)
     if path.is_file() and (pose_file or size):
-        raise ValueError("--pose-file and --resize apply to image folders, not to a .npz")
+        raise UsageError("pose-file", "and --resize apply to image folders, not to a .npz")
     return path, Path(pose_file) if pose_file else None, size
 
 
@@ -59,11 +60,11 @@ def load_data(data: str, pose_file: str, match: str, resize: str, max_difference
 def check_out(out: str, suffix: str, option: str = "--out") -> Path:
     """The output file ``out`` (its folder created); ``suffix`` ('' for any) must match."""
     if not out:
-        raise ValueError(f"{option} must name a file")
+        raise UsageError(option, "must name a file")
     path = Path(out)
     if suffix and path.suffix != suffix:
-        raise ValueError(f"{option} must end in {suffix}, got {out!r}")
+        raise UsageError(option, f"must end in {suffix}, got {out!r}")
     if path.is_dir():
-        raise ValueError(f"{option}: {out} is a folder; name a file")
+        raise UsageError(option, f"{out} is a folder; name a file")
     path.parent.mkdir(parents=True, exist_ok=True)
     return path

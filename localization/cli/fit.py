@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from localization.cli._args import UsageError
 from localization.cli._recorded import check_data_options, check_out, load_data
 from localization.features import FEATURE_NAMES
 from localization.recorded import MAX_DIFFERENCE
@@ -72,11 +73,11 @@ class Args:
 def localizer_params(args: Args) -> dict[str, Any]:
     """Keyword arguments of AppearanceLocalizer from the options (only those given)."""
     if args.features not in FEATURE_NAMES:
-        raise ValueError(f"--features must be one of {', '.join(FEATURE_NAMES)}, "
+        raise UsageError("features", f"must be one of {', '.join(FEATURE_NAMES)}, "
                          f"got {args.features!r}")
     for name in ("n_components", "n_neighbors", "noise_folds"):
         if getattr(args, name) < 0:
-            raise ValueError(f"--{name.replace('_', '-')} must be >= 0, got {getattr(args, name)}")
+            raise UsageError(name, f"must be >= 0, got {getattr(args, name)}")
     params: dict[str, Any] = {"features": args.features, "random_state": args.seed}
     if args.n_components:
         params["features_params"] = {"n_components": args.n_components}
@@ -91,7 +92,7 @@ def fit_recorded(args: Args, out: Path) -> None:
 
     check_data_options(args.data, args.pose_file, args.match, args.resize)
     if args.noise_folds == 1:
-        raise ValueError("--noise-folds must be 0 or >= 2, got 1")
+        raise UsageError("noise-folds", "must be 0 or >= 2, got 1")
     params = {**localizer_params(args), "noise_folds": args.noise_folds}
     rec = load_data(args.data, args.pose_file, args.match, args.resize, args.max_difference,
                     require_poses=True)
@@ -115,11 +116,11 @@ def fit_city(args: Args, out: Path) -> None:
     from localization.workflows.tracking import fit_city_localizer
 
     if args.lanes not in LANES:
-        raise ValueError(f"--lanes must be one of {', '.join(LANES)}, got {args.lanes!r}")
+        raise UsageError("lanes", f"must be one of {', '.join(LANES)}, got {args.lanes!r}")
     if args.n_train < 1:
-        raise ValueError(f"--n-train must be >= 1, got {args.n_train}")
+        raise UsageError("n-train", f"must be >= 1, got {args.n_train}")
     if args.n_drive < MIN_DRIVE:  # the noise's correlation time needs 4 blocks of 50 steps
-        raise ValueError(f"--n-drive must be >= {MIN_DRIVE}, got {args.n_drive}")
+        raise UsageError("n-drive", f"must be >= {MIN_DRIVE}, got {args.n_drive}")
     params = localizer_params(args)
     env = gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, camera=args.camera,
                    image_size=(args.image_size, args.image_size),

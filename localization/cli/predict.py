@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from localization.cli._args import UsageError
 from localization.cli._recorded import check_data_options, check_out, load_data
 from localization.recorded import MAX_DIFFERENCE, write_tum
 
@@ -63,10 +64,10 @@ def load_checked(args: Args) -> tuple[AppearanceLocalizer, Path]:
     from localization.localizer import AppearanceLocalizer
 
     if args.format not in FORMATS:
-        raise ValueError(f"--format must be one of {', '.join(FORMATS)}, got {args.format!r}")
+        raise UsageError("format", f"must be one of {', '.join(FORMATS)}, got {args.format!r}")
     check_data_options(args.data, args.pose_file, args.match, args.resize)
     if not Path(args.localizer).is_file():
-        raise FileNotFoundError(f"--localizer: no file at {args.localizer} (write one with "
+        raise UsageError("localizer", f"no file at {args.localizer} (write one with "
                                 "'appearance-nav fit')")
     out = check_out(args.out, ".npz" if args.format == "npz" else "")
     return AppearanceLocalizer.load(args.localizer), out
@@ -91,7 +92,7 @@ def run(args: Args) -> None:
                     require_poses=False)
     if tuple(rec.images.shape[1:3]) != tuple(loc.image_size_):
         h, w = loc.image_size_
-        raise ValueError(f"--data: images are {rec.images.shape[1]}x{rec.images.shape[2]} "
+        raise UsageError("data", f"images are {rec.images.shape[1]}x{rec.images.shape[2]} "
                          f"(HxW) but {args.localizer} was fitted on {h}x{w}; pass "
                          f"--resize {h}x{w}")
     t0 = time.perf_counter()
