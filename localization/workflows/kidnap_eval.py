@@ -16,20 +16,17 @@ same images and controls):
    ``RECOVERED_ERROR`` (0.5 m) for ``RECOVERED_STEPS`` (10) steps in a row (the first of
    them); None if it never does within the drive.
 
-:func:`evaluate_kidnapping` runs ``n_kidnaps`` such drives; :func:`evaluate_global` starts
-the particle filter with no pose (``reset(mode="global")``); :func:`particle_step_cost`
-times one particle-filter step.
+:func:`evaluate_global` starts the particle filter with no pose (``reset(mode="global")``).
+The benchmark (:mod:`localization.workflows.benchmarks.global_loc`) runs all of it.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from envs.datasets import PurePursuit
 from envs.kidnapping import KidnapWrapper
@@ -39,8 +36,7 @@ from localization.filtering.free_space import city_sampler
 from localization.filtering.particles import ParticleBelief
 from localization.geometry import Array
 
-__all__ = ["KidnapDrive", "evaluate_global", "evaluate_kidnapping", "particle_step_cost",
-           "record_kidnap_drive", "run_filter", "steps_to_recover"]
+__all__ = ["KidnapDrive", "evaluate_global", "record_kidnap_drive", "run_filter", "steps_to_recover"]
 
 RECOVERED_ERROR = 0.5  # m
 RECOVERED_STEPS = 10
@@ -151,41 +147,6 @@ def _summary(steps: list[int | None], within: int) -> dict[str, float]:
             "p95_steps": float(np.percentile(s, 95, method="higher"))}  # inf: not recovered
 
 
-def evaluate_kidnapping(env: gym.Env, localizer: Any, n_kidnaps: int = 20,
-                        steps_before: int = 60, steps_after: int = 100, seed: int = 0,
-                        filters: dict[str, dict[str, Any]] | None = None, within: int = 30,
-                        ) -> dict[str, Any]:
-    """Recovery of each filter over ``n_kidnaps`` recorded kidnap drives (seeds ``seed``,
-    ``seed + 1``, ...). ``filters``: name -> constructor options (default all of
-    ``FILTERS``, defaults).
-
-    Returns
-    -------
-    dict: per filter name, {"steps": list, "tracked_before": list of bool, and the summary
-    (rate within ``within`` steps, median and 95th percentile, inf = never)}.
-    """
-    filters = {name: {} for name in FILTERS} if filters is None else filters
-    mm = env.unwrapped.motion_model
-    out: dict[str, Any] = {name: {"steps": [], "tracked_before": []} for name in filters}
-    for k in range(n_kidnaps):
-        drive = record_kidnap_drive(env, localizer, steps_before, steps_after, seed + k)
-        for name, opts in filters.items():
-            means, _, _ = run_filter(name.split(":")[0], drive, localizer, mm, seed + k, **opts)
-            err = np.hypot(*(means[:, :2] - drive.poses[:, :2]).T)
-            out[name]["steps"].append(steps_to_recover(means, drive.poses, drive.kidnap))
-            out[name]["tracked_before"].append(bool(err[drive.kidnap - 1] < RECOVERED_ERROR))
-    for name in filters:
-        out[name].update(_summary(out[name]["steps"], within))
-    return out
-
-
-def street_sampler(city: Any) -> Any:
-    """``sample_free(n, rng) -> (n, 3)``: poses along the city's streets (the sampler
-    :class:`~localization.wrappers.BeliefWrapper` uses,
-    :func:`localization.filtering.free_space.city_sampler`)."""
-    return city_sampler(city)
-
-
 def evaluate_global(env: gym.Env, localizer: Any, n_starts: int = 20, steps: int = 60,
                     seed: int = 0, within: int = 30, **options: Any) -> dict[str, Any]:
     """Global localization: the particle filter starts with ``reset(mode="global")``
@@ -196,20 +157,8 @@ def evaluate_global(env: gym.Env, localizer: Any, n_starts: int = 20, steps: int
     for k in range(n_starts):
         drive = record_kidnap_drive(env, localizer, steps, 0, seed + k)
         f = ParticleBelief(localizer, mm, seed=seed + k,
-                           sample_free=street_sampler(env.unwrapped.city), **options)
+                           sample_free=city_sampler(env.unwrapped.city), **options)
         means, _, _ = f.run(drive.W, drive.controls, mode="global")
         found.append(steps_to_recover(means, drive.poses, 0))
     return {"steps": found, **_summary(found, within)}
 
-
-def particle_step_cost(localizer: Any, motion_model: Any, drive: KidnapDrive,
-                       n_particles: int = 2000, threads: int = 1, **options: Any) -> float:
-    """Mean wall time (ms) of :meth:`ParticleBelief.step` over ``drive`` with ``threads``
-    BLAS/OpenMP threads."""
-    with threadpool_limits(threads):
-        f = ParticleBelief(localizer, motion_model, n_particles=n_particles, **options)
-        f.reset(drive.W[0], x0=drive.poses[0])
-        t0 = time.perf_counter()
-        for u, w in zip(drive.controls, drive.W[1:]):
-            f.step(u, w)
-        return 1e3 * (time.perf_counter() - t0) / len(drive.controls)

@@ -232,15 +232,12 @@ def test_kidnapped_robot_is_recovered_on_a_held_out_city(held_out):
 
 
 def test_global_start_is_localized_on_a_held_out_city(held_out):
-    from localization.workflows.kidnap_eval import (
-        record_kidnap_drive,
-        steps_to_recover,
-        street_sampler,
-    )
+    from localization.filtering.free_space import city_sampler
+    from localization.workflows.kidnap_eval import record_kidnap_drive, steps_to_recover
     env, loc = held_out
     drive = record_kidnap_drive(env, loc, 60, 0, seed=202)
     pf = ParticleBelief(loc, env.unwrapped.motion_model, seed=202,
-                        sample_free=street_sampler(env.unwrapped.city))
+                        sample_free=city_sampler(env.unwrapped.city))
     means, _, _ = pf.run(drive.W, drive.controls, mode="global")
     steps = steps_to_recover(means, drive.poses, 0)
     assert steps is not None and steps <= RECOVERY_BOUND, steps
