@@ -17,8 +17,10 @@ def test_kidnap_stage_writes_the_figure_and_measures_both_filters(localizer, tmp
         env.close()
     assert (tmp_path / "kidnap.png").stat().st_size > 10_000
     assert out["kidnap_step"] == 41
-    assert set(out["steps_to_recover"]) == {"ekf", "particles"}
-    for name, v in out["steps_to_recover"].items():
-        assert v is None or 0 <= v <= 60, (name, v)
+    steps = out["steps_to_recover"]
+    assert set(steps) == {"ekf", "particles"}
+    # measured on this drive: particles 2 steps, the EKF 46 (its 50-step restart)
+    assert steps["particles"] is not None and steps["particles"] <= 10, steps
+    assert steps["ekf"] is None or steps["ekf"] > steps["particles"], steps
     # both filters start at the true pose and track the route lanes they were trained on
     assert all(np.isfinite(r) and r < 1.0 for r in out["rmse_before"].values()), out
