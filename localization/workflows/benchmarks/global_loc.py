@@ -75,7 +75,7 @@ class GlobalBenchConfig:
     cities: str = field(default="21,22,23", metadata={
         "help": "comma-separated scene seeds (never used to choose a default)"})
     lookalike_city: int = field(default=24, metadata={"help": "scene seed of the look-alike city"})
-    filters: str = field(default="ekf,particles", metadata={
+    filters: str = field(default="ekf,ekf_detect,particles", metadata={
         "help": "comma-separated filters of kidnap_eval.run_filter, side by side"})
     image_size: int = field(default=32, metadata={"help": "square image side (px)"})
     motion_noise: float = field(default=0.05, metadata={"help": "env actuation noise"})
