@@ -27,12 +27,11 @@ belief metres). A single aliased image
 therefore cannot move the belief; a kidnap is noticed in about ``window`` steps.
 
 Off by default (``BeliefFilter(detect_divergence=False)``, the wrapper's
-``filter_options={"detect_divergence": True}`` turns it on). Measured on held-out city 11
-(32 x 32, 3000 street images, 20 kidnaps, ``kidnap_eval``): recovered within 30 steps
-65 % (median 20 steps) against 0 % for the EKF without it, but 3 false restarts in the
-1200 tracking steps before the kidnaps, where psi* stayed aliased for ten steps while the
-EKF was right: RMSE before the kidnaps 1.08 m against 0.13 m. Until that is fixed the EKF's
-nominal behaviour stays the default.
+``filter_options={"detect_divergence": True}`` turns it on). ``appearance-nav bench --only
+global`` (held-out cities 21-23, 120 kidnaps; docs/benchmarks.md §5): recovered within 30
+steps 38 % against 1 % for the EKF without it, but false restarts where psi* stays aliased
+for several steps while the EKF is right make nominal tracking worse (RMSE 2.94 m against
+1.65 m). Until that is fixed the EKF's nominal behaviour stays the default.
 """
 
 from __future__ import annotations
