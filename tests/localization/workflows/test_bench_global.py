@@ -71,7 +71,7 @@ def test_quick_run_end_to_end(tmp_path: Path):
     result = run_global_bench(GlobalBenchConfig(quick=True, out_dir=str(tmp_path)))
     saved = json.loads((tmp_path / "bench_global.json").read_text())
     table = (tmp_path / "bench_global.md").read_text()
-    assert saved["filters"] == ["ekf", "particles"] == result["filters"]
+    assert saved["filters"] == ["ekf", "ekf_detect", "particles"] == result["filters"]
     for name in saved["filters"]:
         s = saved["summary"][name]
         assert set(s) == {"kidnap", "nominal", "lookalike", "global"}
@@ -85,4 +85,5 @@ def test_quick_run_end_to_end(tmp_path: Path):
         assert name in table
     assert saved["summary"]["ekf"]["global"] is None  # no global start for the EKF
     assert saved["summary"]["particles"]["global"]["n"] == 1
-    assert "look-alike city 24" in table and "| measure | target | ekf | particles |" in table
+    assert "look-alike city 24" in table
+    assert "| measure | target | ekf | ekf_detect | particles |" in table
