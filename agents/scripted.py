@@ -25,7 +25,7 @@ __all__ = ["BELIEF_KEYS", "SLOW_STATUSES", "STOP_STATUSES", "Navigator", "Script
 BELIEF_KEYS = ("pose_mean", "pose_cov", "goal")
 #: ``info["belief_status"]`` values on which the agent does not steer on the belief
 STOP_STATUSES = ("lost",)
-SLOW_STATUSES = ("relocalizing", "ambiguous")
+SLOW_STATUSES = ("relocalizing", "ambiguous", "doubtful")
 OBS_NAMES = ("obs['pose_mean']", "obs['goal']")  # how Navigator.update names them in errors
 
 

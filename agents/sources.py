@@ -28,6 +28,7 @@ import envs  # noqa: F401  (registers AppearanceNav-v0)
 from envs.appearance_nav import RESET_OPTIONS
 from envs.cameras import check_image_size
 from envs.datasets import check_city_env
+from envs.kidnapping import KidnapWrapper
 from envs.lanes import lane_poses
 from localization._validation import check_choice, check_options, check_real, check_seed
 from localization.wrappers import BeliefWrapper, DeadReckoningWrapper, OracleWrapper
@@ -75,6 +76,7 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
                   scene_seed: int = 0, camera: str = "perspective",
                   image_size: tuple[int, int] = (64, 64), motion_noise: float = 0.1,
                   max_episode_steps: int = 400, start: str = "lane",
+                  kidnap_at: tuple[int, ...] = (), city_layout: str = "random",
                   **belief_kwargs: Any) -> gym.Env:
     """``AppearanceNav-v0`` with the named pose source (see the module docstring).
 
@@ -91,6 +93,11 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
         holds for the motion noise it was fitted with (0.1 in ``make demo``).
     start : {"lane", "random"}
         Start episodes on a street lane (:class:`LaneStart`) or anywhere free (the env's own).
+    kidnap_at : tuple of int
+        Steps of each episode that start with a kidnap (:class:`envs.kidnapping.KidnapWrapper`
+        under the pose source, seeded by the reset seed: no pose source is told).
+    city_layout : {"random", "lookalike"}
+        The env's city layout.
     **belief_kwargs
         More BeliefWrapper settings (``filter``, ``filter_options``, ``gate_probability``,
         ``relocalize_after``, ...).
@@ -103,9 +110,11 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
         raise ValueError(f"belief settings {sorted(belief_kwargs)} apply to source 'belief' only")
     env = gym.make("AppearanceNav-v0", scene_seed=scene_seed, camera=camera,
                    image_size=check_image_size(image_size), motion_noise=motion_noise,
-                   max_episode_steps=max_episode_steps)
+                   max_episode_steps=max_episode_steps, city_layout=city_layout)
     if start == "lane":
         env = LaneStart(env)
+    if kidnap_at:
+        env = KidnapWrapper(env, at_steps=kidnap_at)
     if source == "oracle":
         return OracleWrapper(env)
     if source == "dead_reckoning":

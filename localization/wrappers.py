@@ -48,7 +48,7 @@ FILTER_OPTIONS = {
     "particles": ("n_particles", "resample_threshold", "resample", "alpha", "alpha_slow",
                   "alpha_fast", "injection_ratio", "max_injection", "n_neighbors",
                   "proposal_noise", "global_proposal_fraction", "sample_free", "lost_ratio",
-                  "confident_weight", "mode_radius", "heading_scale", "seed"),
+                  "doubt_ratio", "confident_weight", "mode_radius", "heading_scale", "seed"),
 }
 
 
@@ -153,7 +153,8 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
     images agree); the other options go to the env. ``info`` gets ``nis`` (NaN when none was
     computed; always NaN for particles), ``nis_dof``, ``measurement_status`` (the filter's
     own status), ``belief_status`` ("tracking", "ambiguous", "lost" or "relocalizing",
-    :data:`~localization.filtering.divergence.BELIEF_STATUSES`), ``hypotheses``
+    :data:`~localization.filtering.divergence.BELIEF_STATUSES`; particles also "doubtful":
+    this image disagrees with the belief), ``hypotheses``
     (``{"weights": (k,), "means": (k, 3)}``, heaviest first; one for the EKF) and ``nees``
     (from ``info["pose"]``, for evaluation only).
     """

@@ -13,7 +13,7 @@ import envs  # noqa: F401
 from envs.motion_model import UnicycleModel
 from localization.filtering._modes import circular_mean, find_modes
 from localization.filtering.particle_motion import is_unicycle, predict_particles, unicycle_step
-from localization.filtering.particles import ParticleBelief
+from localization.filtering.particles import PARTICLE_STATUSES, ParticleBelief
 from localization.geometry import wrap_angle
 
 from ..conftest import held_out_localizer
@@ -162,8 +162,7 @@ def test_tracks_the_drive_it_was_fitted_with(localizer, features):
         W, controls, x0=poses[0])
     err = np.hypot(*(means[:, :2] - poses[:, :2]).T)
     assert np.sqrt(np.mean(err ** 2)) < 0.35, err.max()
-    assert set(statuses) <= {"initial", "tracking", "ambiguous", "relocalizing", "lost",
-                             "out_of_domain"}
+    assert set(statuses) <= set(PARTICLE_STATUSES)
 
 
 # ---------------------------------------------------------------- bad inputs
@@ -205,7 +204,7 @@ def test_bad_inputs_raise_clear_errors(localizer, features):
 
 
 # ---------------------------------------------------------------- held-out city
-HELD_OUT = 11  # never used to choose a default
+HELD_OUT = 17  # never used to choose a default (tuning cities: 11-14)
 RECOVERY_BOUND = 30  # steps; measured (20 kidnaps, this localizer): median 6, 18 of 20 <= 30
 
 

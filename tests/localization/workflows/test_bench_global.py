@@ -74,7 +74,8 @@ def test_quick_run_end_to_end(tmp_path: Path):
     assert saved["filters"] == ["ekf", "ekf_detect", "particles"] == result["filters"]
     for name in saved["filters"]:
         s = saved["summary"][name]
-        assert set(s) == {"kidnap", "nominal", "lookalike", "global"}
+        assert set(s) == {"kidnap", "nominal", "lookalike", "global", "agents"}
+        assert s["agents"]["episodes"] == 1 and 0.0 <= s["agents"]["success_rate"] <= 1.0
         assert s["kidnap"]["n"] == 2 and s["lookalike"]["n"] == 1
         assert 0.0 <= s["kidnap"]["recovered_within_30"] <= 1.0
         assert 0.0 <= s["lookalike"]["wrong_twin_runs"] <= 1.0
@@ -87,3 +88,5 @@ def test_quick_run_end_to_end(tmp_path: Path):
     assert saved["summary"]["particles"]["global"]["n"] == 1
     assert "look-alike city 24" in table
     assert "| measure | target | ekf | ekf_detect | particles |" in table
+    assert "agents: scripted agent, one kidnap per episode" in table
+    assert len(saved["agent_runs"]["particles"]) == 1
