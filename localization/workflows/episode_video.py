@@ -64,8 +64,9 @@ def episode_video(localizer: Any, out: str | Path, *, scene_seed: int = 0,
                   camera: str = "perspective", image_size: int = 64,
                   motion_noise: float = 0.1, seed: int = 0, kidnap_at: int = 60,
                   max_steps: int = 400, rerun: str | Path | None = None) -> dict[str, Any]:
-    """Drive the episode (see the module docstring); write ``out`` (MP4) and a still of the
-    re-localization ``out`` with suffix ``.png``; return a summary.
+    """Drive the episode (see the module docstring); write ``out`` (MP4) and, with suffix
+    ``.png``, the first frame after the kidnap whose belief is not "tracking" (the filter
+    has noticed; else the last frame); return a summary.
 
     Returns
     -------
@@ -96,8 +97,9 @@ def episode_video(localizer: Any, out: str | Path, *, scene_seed: int = 0,
             frame = driven.render()
             writer.append(frame)
             draw_seconds += time.perf_counter() - t
-            if len(true) == kidnap_at + 4:  # a few steps after the kidnap: the particles at work
-                still = frame
+            if (still is None and len(true) > kidnap_at
+                    and info.get("belief_status") != "tracking"):
+                still = frame  # the belief has noticed the kidnap: the particles at work
             if done:
                 break
             action = agent.act(obs, info)
