@@ -29,6 +29,7 @@ from envs.robot import (
     WHEEL_RADIUS,
 )
 from envs.scene import City, generate_city
+from envs.top_down import TopDownMap, top_down_map
 from localization._validation import (
     check_array,
     check_choice,
@@ -269,6 +270,10 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         self.data.qvel[:] = 0.0
         self.data.ctrl[:] = 0.0
         mujoco.mj_forward(self.model, self.data)
+
+    def top_down_map(self) -> TopDownMap:
+        """The city from above as plain arrays (:class:`envs.top_down.TopDownMap`)."""
+        return top_down_map(self.city)
 
     def render_camera(self) -> NDArray[np.uint8]:
         """Return the camera image at the current state, (H, W, 3) uint8."""

@@ -20,6 +20,13 @@ others unchanged.
 - :class:`DeadReckoningWrapper`: F alone from the true start pose, covariance growing with Q.
 
 Every wrapper adds ``info["nees"]`` from ``info["pose"]`` (evaluation only).
+
+``render()`` (when the env has ``render_mode="rgb_array"``) draws the belief on the city map
+(:mod:`localization.belief_render`): the true pose, the belief mean and its 2-sigma
+ellipse, the particles and other hypotheses (particle filter), the goal, the planned path
+(``planned_path``, set by whoever plans) and the camera image, so
+``gymnasium.wrappers.RecordVideo`` records episodes as they are. Nothing is drawn unless
+``render()`` is called.
 """
 
 from __future__ import annotations
@@ -39,6 +46,7 @@ from localization.filtering.particles import ParticleBelief
 from localization.filtering.process_noise import world_process_noise
 from localization.geometry import Array, cov_to_triu, wrap_angle
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer, city_info
+from localization.wrapper_render import RenderBelief
 
 FILTERS = ("ekf", "particles")
 LOCALIZE = ("image", "global")
@@ -58,8 +66,9 @@ def _nees(mean: Array, P: Array, pose: ArrayLike) -> float:
     return float(e @ np.linalg.solve(P, e))
 
 
-class _PoseObservation(gym.ObservationWrapper):
-    """Shared part: the belief Dict space and the observation from a mean and covariance."""
+class _PoseObservation(RenderBelief, gym.ObservationWrapper):
+    """Shared part: the belief Dict space, the observation from a mean and covariance, and
+    :meth:`render` (:class:`~localization.wrapper_render.RenderBelief`)."""
 
     def __init__(self, env: gym.Env, keep_image: bool) -> None:
         if not isinstance(env, gym.Env):
@@ -80,6 +89,7 @@ class _PoseObservation(gym.ObservationWrapper):
         self.observation_space = spaces.Dict(belief)
         self.mean: Array | None = None
         self.cov: Array | None = None
+        RenderBelief.__init__(self)
 
     def observation(self, observation: dict[str, Any]) -> dict[str, Any]:
         """The belief observation from the env's observation and the current belief."""
@@ -89,6 +99,7 @@ class _PoseObservation(gym.ObservationWrapper):
                "goal": observation["goal"]}
         if self.keep_image:
             out["image"] = observation["image"]
+        self._see(observation=observation)  # for render(): a reference, no copy
         return out
 
     def _control(self, action: Any) -> Array:
@@ -98,6 +109,7 @@ class _PoseObservation(gym.ObservationWrapper):
     def _add_nees(self, info: dict[str, Any]) -> None:
         if "pose" in info and self.mean is not None and self.cov is not None:
             info["nees"] = _nees(self.mean, self.cov, info["pose"])
+        self._see(info=info)  # for render(): a reference, no copy
 
 
 class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
@@ -263,6 +275,11 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
             return {"weights": h["weights"], "means": h["means"]}
         return {"weights": np.ones(1), "means": self.belief.x[None]}
 
+    @property
+    def render_title(self) -> str:
+        """The first status line of :meth:`render`'s frames."""
+        return f"{self.filter} belief"
+
     def _publish(self, info: dict[str, Any], nis: float, status: str) -> None:
         self.mean, self.cov = self.belief.x, self.belief.P
         if isinstance(self.belief, BeliefFilter):
@@ -288,6 +305,8 @@ class OracleWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         Standard deviations of x, y (m) and yaw (rad) put in ``pose_cov``.
     keep_image : bool
     """
+
+    render_title = "oracle: the true pose"
 
     def __init__(self, env: gym.Env, std: tuple[float, float, float] = (0.01, 0.01, 0.005),
                  keep_image: bool = False) -> None:
@@ -335,6 +354,8 @@ class DeadReckoningWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         Calibrated control gains k: F predicts with ``k U`` (``localizer.control_gain_``).
     keep_image : bool
     """
+
+    render_title = "dead reckoning: F alone"
 
     def __init__(self, env: gym.Env, process_noise_body: ArrayLike,
                  initial_std: tuple[float, float, float] = (0.01, 0.01, 0.005),

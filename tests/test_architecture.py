@@ -23,7 +23,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("localization.filtering",),
     ("localization.localizer", "localization._localizer_io", "localization._localizer_noise",
      "localization._localizer_map",
-     "localization.wrappers"),
+     "localization.wrappers", "localization.wrapper_render", "localization.belief_render"),
     ("agents",),
     ("localization.workflows",),
     ("localization.cli",),

@@ -2,18 +2,22 @@
 
     appearance-nav demo                 # default city (scene seed 0), results/ as output
     appearance-nav demo --scene-seed 3 --lanes route
+    appearance-nav demo --rerun results/demo.rrd     # then: rerun results/demo.rrd
 
 Stages: (1) drive the route once: ``<out>/route_dataset.npz`` and ``<out>/demo_route.png``;
 (2) fit the localizer (features + GSE + noise model) on images around the driving lanes:
 ``<out>/localizer.npz``; (3) closed-loop tracking of each measurement model against dead
-reckoning: ``<out>/track_<model>.png``, ``<out>/demo.md``; (4) the scripted agent on every
-pose source: ``<out>/demo_agents/agents.md``. Everything also in ``<out>/demo.json``.
+reckoning: ``<out>/track_<model>.png``, ``<out>/demo.md``, the kidnapping stage and the
+episode video ``<out>/episode.mp4`` (the scripted agent on the particle belief through a
+kidnap; ``--rerun FILE.rrd`` also records it for the Rerun viewer, ``rerun FILE.rrd``);
+(4) the scripted agent on every pose source: ``<out>/demo_agents/agents.md``. Everything also in ``<out>/demo.json``.
 """
 
 from __future__ import annotations
 
 # isort: split
 from localization.cli._args import check_choice, check_env, check_numbers, check_output_dir
+from localization.cli._rerun import check_rerun
 from localization.workflows.demo import DemoConfig, run_demo
 from localization.workflows.sim import LANE_SETS
 
@@ -29,6 +33,7 @@ def check(args: Args) -> None:
                   non_negative=("seed", "start", "episodes"))
     check_choice("lanes", args.lanes, LANE_SETS)
     check_output_dir("out", args.out)
+    check_rerun(args.rerun)
 
 
 def run(args: Args) -> None:

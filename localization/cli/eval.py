@@ -2,13 +2,16 @@
 
     appearance-nav eval --episodes 100
     appearance-nav eval --agents scripted --sources oracle,dead_reckoning
+    appearance-nav eval --agents scripted --episodes 5 --rerun results/eval.rrd
 
 For every agent (the scripted street navigator; PPO policies trained by
 ``appearance-nav train``, each evaluated on the pose source it was trained on; a missing
 policy is skipped with a note) and pose source (oracle = true pose, belief = the GSE/EKF
 belief from images, dead_reckoning = the motion model alone), the same ``episodes`` resets
 (seeds ``seed .. seed + episodes - 1``) are run. Writes ``<out>/agents.md`` (table) and
-``<out>/agents.json`` (summary and every episode).
+``<out>/agents.json`` (summary and every episode). ``--rerun FILE.rrd`` (the ``viewer`` extra)
+also records the first ``--rerun-episodes`` episodes of each agent and source, step by step,
+for the Rerun viewer (``rerun FILE.rrd``).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from localization.cli._args import (
     check_numbers,
     check_output_dir,
 )
+from localization.cli._rerun import check_rerun
 from localization.localizer import MEASUREMENTS
 from localization.workflows.navigation import AGENTS, EvalConfig, evaluate_agents
 
@@ -43,8 +47,10 @@ def check(args: Args) -> None:
         check_choice("measurement", args.measurement, MEASUREMENTS)
     check_env(args)
     check_choice("start", args.start, STARTS)
-    check_numbers(args, positive=("max_episode_steps", "episodes"), non_negative=("seed",))
+    check_numbers(args, positive=("max_episode_steps", "episodes"),
+                  non_negative=("seed", "rerun_episodes"))
     check_output_dir("out", args.out)
+    check_rerun(args.rerun)
 
 
 def run(args: Args) -> None:

@@ -3,12 +3,15 @@ controller on the belief mean, for each measurement model, against dead reckonin
 
     appearance-nav track                               # default city, fits a localizer
     appearance-nav track --localizer results/localizer.npz --steps 2000
+    appearance-nav track --localizer results/localizer.npz --rerun results/track.rrd
 
 For each measurement model and start point it writes ``<out>/track_<model>_<start>.png``
 (top-down map with the true path, the belief with 2-sigma ellipses and the dead-reckoning
 path; error over time; NEES and NIS), and ``<out>/track.json`` / ``<out>/track.md`` with the
 scores (position RMSE of the belief and of dead reckoning over the same run, their ratio,
 mean NEES and its chi-square band over the runs, NIS, acceptance, time per step).
+``--rerun FILE.rrd`` (the ``viewer`` extra) also records every run, step by step, for the
+Rerun viewer (``rerun FILE.rrd``).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from localization.cli._args import (
     check_numbers,
     check_output_dir,
 )
+from localization.cli._rerun import check_rerun
 from localization.localizer import MEASUREMENTS
 from localization.workflows.sim import LANE_SETS
 from localization.workflows.track_runs import TrackConfig, run_tracking
@@ -44,6 +48,7 @@ def check(args: Args) -> None:
     check_choices("measurements", args.measurements, MEASUREMENTS)
     check_int_list("starts", args.starts, minimum=0)
     check_output_dir("out", args.out)
+    check_rerun(args.rerun)
 
 
 def run(args: Args) -> None:

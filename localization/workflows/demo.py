@@ -18,7 +18,10 @@ Stages:
    ``<out>/track_<model>.png`` and print the results table (also ``<out>/demo.md``);
    then the kidnapping stage (``kidnap``): one unannounced kidnap on a street drive, the EKF
    and the particle belief side by side, ``<out>/kidnap.png``
-   (:func:`localization.workflows.kidnap_demo.kidnap_demo`);
+   (:func:`localization.workflows.kidnap_demo.kidnap_demo`); then the episode video
+   (``video``): the scripted agent on the particle belief through a kidnap,
+   ``<out>/episode.mp4`` (:func:`localization.workflows.episode_video.episode_video`;
+   ``rerun``: the same episode as a Rerun recording);
 4. navigation: the scripted agent (street planner + pure pursuit) drives ``episodes``
    seeded episodes to random goals on each pose source (true pose, belief, dead reckoning;
    :func:`localization.workflows.navigation.evaluate_agents`), table in
@@ -39,7 +42,8 @@ import envs  # chooses MUJOCO_GL before mujoco is imported
 # isort: split
 import gymnasium as gym
 
-from localization.localizer import MEASUREMENTS
+from localization.localizer import MEASUREMENTS, AppearanceLocalizer
+from localization.workflows.episode_video import episode_video
 from localization.workflows.kidnap_demo import kidnap_demo
 from localization.workflows.navigation import EvalConfig, evaluate_agents
 from localization.workflows.plotting import plot_route, plot_track
@@ -69,6 +73,12 @@ class DemoConfig:
     start: int = field(default=0, metadata={"help": "tracking start (route path point)"})
     kidnap: bool = field(default=True, metadata={
         "help": "the kidnapping stage: EKF and particle belief through one unannounced kidnap"})
+    video: bool = field(default=True, metadata={
+        "help": "the episode video: the scripted agent on the particle belief through a "
+                "kidnap, <out>/episode.mp4"})
+    rerun: str = field(default="", metadata={
+        "help": "also record the video's episode to this Rerun .rrd file (the viewer "
+                "extra); empty: none"})
     episodes: int = field(default=30, metadata={
         "help": "navigation episodes of the scripted agent per pose source (0: skip)"})
     out: str = field(default="results", metadata={"help": "output folder"})
@@ -94,6 +104,21 @@ def _navigate(args: DemoConfig, out: Path) -> list[dict]:
             agents="scripted", episodes=args.episodes, localizer=str(out / "localizer.npz"),
             scene_seed=args.scene_seed, camera=args.camera, image_size=args.image_size,
             motion_noise=args.motion_noise, out=str(out / "demo_agents")))
+
+
+def _video(args: DemoConfig, loc: AppearanceLocalizer, out: Path, seconds: dict) -> dict:
+    """The episode video stage (and its Rerun recording with ``--rerun``)."""
+    t1 = time.perf_counter()
+    video = episode_video(loc, out / "episode.mp4", scene_seed=args.scene_seed,
+                          camera=args.camera, image_size=args.image_size,
+                          motion_noise=args.motion_noise, seed=args.seed,
+                          rerun=args.rerun or None)
+    seconds["video"] = time.perf_counter() - t1
+    print(f"[demo] episode video: {video['frames']} frames, kidnapped at step "
+          f"{video['kidnap_step']}, back within 1 m after {video['steps_to_recover']} steps, "
+          f"goal {'reached' if video['success'] else 'not reached'}; {video['mp4']}"
+          + (f"; Rerun: rerun {args.rerun}" if args.rerun else ""), flush=True)
+    return video
 
 
 def run_demo(args: DemoConfig) -> dict:
@@ -144,6 +169,7 @@ def run_demo(args: DemoConfig) -> dict:
               f"{kidnap['steps_to_recover']} (None: not within the drive); {kidnap['png']}",
               flush=True)
     env.close()
+    video = _video(args, loc, out, seconds) if args.video or args.rerun else {}
     table = demo_table(rows)
     (out / "demo.md").write_text(table)
     navigation = []
@@ -154,7 +180,7 @@ def run_demo(args: DemoConfig) -> dict:
     seconds["total"] = time.perf_counter() - t0
     summary = {"dataset": str(dataset), "route_png": str(figure), "frames": len(poses),
                "localizer": str(out / "localizer.npz"), "tracking": rows,
-               "navigation": navigation, "kidnap": kidnap,
+               "navigation": navigation, "kidnap": kidnap, "video": video,
                "control_gain": loc.control_gain_.tolist(),
                "consistency": {k: v.tolist() for k, v in loc.consistency_.items()},
                "quality": loc.quality_,

@@ -31,6 +31,7 @@ from agents.scripted import ScriptedAgent
 from agents.sources import POSE_SOURCES, make_pose_env
 from localization.localizer import AppearanceLocalizer
 from localization.workflows.agent_env import AgentEnvSettings, city_options
+from localization.workflows.rerun_log import RerunLog, RerunRecorder
 
 __all__ = ["AGENTS", "EvalConfig", "agents_table", "evaluate_agents"]
 
@@ -51,6 +52,10 @@ class EvalConfig(AgentEnvSettings):
     episodes: int = field(default=100, metadata={"help": "episodes per agent and source"})
     seed: int = field(default=2_000_000, metadata={"help": "first reset seed"})
     out: str = field(default="results", metadata={"help": "where agents.md / agents.json go"})
+    rerun: str = field(default="", metadata={
+        "help": "also record episodes to this Rerun .rrd file (the viewer extra); empty: none"})
+    rerun_episodes: int = field(default=1, metadata={
+        "help": "with --rerun: the first this many episodes of each agent and source"})
 
 
 def agents_table(rows: list[dict]) -> str:
@@ -74,6 +79,7 @@ def evaluate_agents(args: EvalConfig) -> list[dict]:
         localizer = AppearanceLocalizer.load(args.localizer)
     seeds = range(args.seed, args.seed + args.episodes)
     rows, episodes = [], {}
+    log = RerunLog(args.rerun) if args.rerun else None
     for source in sources:
         env = make_pose_env(source, localizer, measurement=args.measurement or None,
                             scene_seed=args.scene_seed, camera=args.camera,
@@ -92,13 +98,19 @@ def evaluate_agents(args: EvalConfig) -> list[dict]:
                     continue
                 agent = PPOAgent.load(policy, city)
             t0 = time.perf_counter()
-            runs = run_episodes(env, agent, seeds, desc=f"{name} on {source}")
+            runs = run_episodes(env if log is None else RerunRecorder(
+                env, log, f"{name}/{source}", args.rerun_episodes,
+                path=lambda agent=agent: getattr(agent, "path", None)),
+                agent, seeds, desc=f"{name} on {source}")
             summary = {"agent": name, "source": source, **summarize(runs),
                        "wall_seconds": round(time.perf_counter() - t0, 1)}
             rows.append(summary)
             episodes[f"{name}/{source}"] = as_records(runs)
             print(agents_table([summary]).splitlines()[-1], flush=True)
         env.close()
+    if log is not None:
+        log.close()
+        print(f"Rerun recording: {args.rerun} (open it with: rerun {args.rerun})")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     md = (f"# Navigation on the pose belief\n\nCity {args.scene_seed}, {args.camera} "

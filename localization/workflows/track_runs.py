@@ -16,6 +16,7 @@ import json
 import time
 import warnings
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
@@ -27,6 +28,7 @@ from tqdm import tqdm
 
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer, city_info
 from localization.workflows.plotting import plot_track
+from localization.workflows.rerun_log import RerunLog, RerunRecorder
 from localization.workflows.tracking import (
     fit_city_localizer,
     nees_band,
@@ -60,6 +62,9 @@ class TrackConfig:
     out: str = field(default="results", metadata={"help": "output folder"})
     allow_other_city: bool = field(default=False, metadata={
         "help": "run a localizer fitted on another city (refused by default)"})
+    rerun: str = field(default="", metadata={
+        "help": "also record every run to this Rerun .rrd file (the viewer extra); "
+                "empty: none"})
 
 
 def make_env(args: TrackConfig) -> gym.Env:
@@ -130,10 +135,14 @@ def run_tracking(args: TrackConfig, env: gym.Env | None = None,
     t0 = time.perf_counter()
     runs = [(name, int(s)) for name in args.measurements.split(",")
             for s in args.starts.split(",")]
+    log = RerunLog(args.rerun, base.top_down_map()) if args.rerun else None
+    route = np.vstack([base.city.route(), base.city.route()[:1]])  # the closed loop driven
     for name, start in tqdm(runs, desc="tracking runs", unit="run"):
+        recorder = None if log is None else partial(
+            RerunRecorder, log=log, name=f"track/{name}_{start}", path=lambda: route)
         result = track_route(env, localizer, name, args.steps, start=start,
                              seed=args.seed + 100 + start,
-                             allow_other_city=args.allow_other_city)
+                             allow_other_city=args.allow_other_city, recorder=recorder)
         m = track_metrics(result)
         base.set_pose(result.true[0])  # the map shows the robot at the start
         png = plot_track(result, base.render(), base.city.bounds,
@@ -143,6 +152,9 @@ def run_tracking(args: TrackConfig, env: gym.Env | None = None,
                    f"{m['rmse_dead_reckoning']:.2f} m (ratio {m['ratio']:.3f}), NEES "
                    f"{m['nees_mean']:.2f}, accepted {m['accepted']:.2f}")
     seconds["track"] = time.perf_counter() - t0
+    if log is not None:
+        log.close()
+        print(f"Rerun recording: {args.rerun} (open it with: rerun {args.rerun})")
     summary = summarize_runs(rows)
     result = {"args": dataclasses.asdict(args), "seconds": seconds, "runs": rows,
               "summary": summary,

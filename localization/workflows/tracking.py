@@ -26,6 +26,7 @@ benchmark (:mod:`.benchmarks.filter`) and the tests.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -170,18 +171,22 @@ def fit_city_noise(env: gym.Env, localizer: AppearanceLocalizer, lanes: str = "r
 
 def track_route(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
                 steps: int, start: int = 0, seed: int = 0, keep_images: bool = False,
-                allow_other_city: bool = False, **wrapper_options: Any) -> TrackResult:
+                allow_other_city: bool = False,
+                recorder: Callable[[gym.Env], gym.Env] | None = None,
+                **wrapper_options: Any) -> TrackResult:
     """Drive ``steps`` steps along the city's route on the belief mean.
 
     The robot starts on the route's path point ``start`` (``PurePursuit.path``), heading
     along it; :class:`PurePursuit` steers on the belief mean (never on the true pose).
-    ``wrapper_options`` go to :class:`BeliefWrapper`. A localizer fitted on another city
-    raises :class:`~localization.localizer.OtherCityError` unless ``allow_other_city``.
+    ``wrapper_options`` go to :class:`BeliefWrapper`; ``recorder`` wraps it for the drive
+    (e.g. a :class:`~localization.workflows.rerun_log.RerunRecorder`). A localizer fitted on
+    another city raises :class:`~localization.localizer.OtherCityError` unless
+    ``allow_other_city``.
     """
     base = env.unwrapped
     pilot = PurePursuit(base.city.route(), w_max=base.W_MAX)
     return _track(env, localizer, measurement, pilot, pilot.start_pose(start), steps, seed,
-                  keep_images, allow_other_city, wrapper_options)
+                  keep_images, allow_other_city, wrapper_options, recorder)
 
 
 def track_streets(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
@@ -201,13 +206,15 @@ def track_streets(env: gym.Env, localizer: AppearanceLocalizer, measurement: str
 
 def _track(env: gym.Env, localizer: AppearanceLocalizer, measurement: str, pilot: PurePursuit,
            start: Array, steps: int, seed: int, keep_images: bool, allow_other_city: bool,
-           wrapper_options: dict[str, Any]) -> TrackResult:
+           wrapper_options: dict[str, Any],
+           recorder: Callable[[gym.Env], gym.Env] | None = None) -> TrackResult:
     if measurement not in MEASUREMENTS:
         raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
     base = env.unwrapped
     wrapped = BeliefWrapper(env, localizer, measurement, keep_image=keep_images,
                             allow_other_city=allow_other_city, **wrapper_options)
-    obs, info = wrapped.reset(seed=seed, options={"pose": start})
+    driven = wrapped if recorder is None else recorder(wrapped)
+    obs, info = driven.reset(seed=seed, options={"pose": start})
     rows = {"true": [info["pose"]], "mean": [wrapped.mean], "cov": [wrapped.cov],
             "nis": [info["nis"]], "nees": [info["nees"]]}
     status, controls, images = [info["measurement_status"]], [], [obs.get("image")]
@@ -216,7 +223,7 @@ def _track(env: gym.Env, localizer: AppearanceLocalizer, measurement: str, pilot
     t0 = time.perf_counter()
     for _ in range(steps):
         u = np.clip(pilot(obs["pose_mean"].astype(np.float64)), space.low, space.high)
-        obs, _, _, _, info = wrapped.step(u)
+        obs, _, _, _, info = driven.step(u)
         controls.append(u)
         dr.append(base.motion_model.predict(dr[-1], localizer.control_gain_ * u))
         for k, v in (("true", info["pose"]), ("mean", wrapped.mean), ("cov", wrapped.cov),

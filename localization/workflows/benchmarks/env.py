@@ -19,6 +19,13 @@ What is measured
   per-chunk rates) and the best chunk (closest to an idle machine); ratio = median over
   chunk pairs of raw time / env time.
 Targets (PASS/MISS): >= 1000 env steps/s (median) at 64x64 (perspective) and ratio >= 0.8.
+
+One more row, rendering (64x64 perspective, ``render_mode=None`` unless said): the bare env,
+the env under a pose wrapper (``OracleWrapper``, whose ``render()`` draws the belief), and
+that wrapper with ``render_mode="rgb_array"`` calling ``render()`` after every step (what
+``RecordVideo`` does), alternating in chunks as above. Nobody rendering must cost nothing:
+wrapped / bare is the pose wrapper's whole overhead (its render bookkeeping is two reference
+stores a step); the third loop gives the cost of a frame when one is asked for.
 """
 
 from __future__ import annotations
@@ -41,6 +48,7 @@ import numpy as np
 
 from envs.cameras import make_camera
 from envs.robot import HALF_TRACK, WHEEL_RADIUS
+from localization.wrappers import OracleWrapper
 
 TARGET_STEPS_PER_S = 1000.0
 TARGET_RATIO = 0.8
@@ -157,6 +165,56 @@ def bench_one(camera: str, size: int, args: EnvBenchConfig) -> dict[str, Any]:
             "env_chunk_seconds": env_t.tolist(), "raw_chunk_seconds": raw_t.tolist()}
 
 
+class RenderLoop(EnvLoop):
+    """:class:`EnvLoop` calling ``render()`` after every step (as RecordVideo does)."""
+
+    def run(self, steps: int) -> float:
+        env, actions = self.env, self.actions
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            _, _, terminated, truncated, _ = env.step(actions[self.i % len(actions)])
+            env.render()
+            self.i += 1
+            if terminated or truncated:
+                env.reset()
+        return time.perf_counter() - t0
+
+
+def bench_render(args: EnvBenchConfig) -> dict[str, Any]:
+    """Bare env vs pose-wrapped (render_mode=None) vs pose-wrapped rendering every step."""
+
+    def make(mode: str | None) -> gym.Env:
+        return gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, image_size=(64, 64),
+                        max_episode_steps=10**9, render_mode=mode)
+
+    envs_ = [make(None), OracleWrapper(make(None)), OracleWrapper(make("rgb_array"))]
+    envs_[0].action_space.seed(args.seed)
+    actions = np.array([envs_[0].action_space.sample() for _ in range(args.warmup + args.steps)])
+    loops = [EnvLoop(envs_[0], actions), EnvLoop(envs_[1], actions), RenderLoop(envs_[2], actions)]
+    for env, loop in zip(envs_, loops, strict=True):
+        env.reset(seed=args.seed)
+        loop.run(args.warmup)
+    times = np.array([[loop.run(args.chunk) for loop in loops]
+                      for _ in range(max(1, args.steps // args.chunk))])  # (chunks, 3)
+    for env in envs_:
+        env.close()
+    rates = np.median(args.chunk / times, axis=0)
+    return {"bare_steps_per_s": float(rates[0]), "wrapped_steps_per_s": float(rates[1]),
+            "rendering_steps_per_s": float(rates[2]),
+            "wrapped_ratio": float(np.median(times[:, 0] / times[:, 1])),
+            "ms_per_frame": float(1e3 * np.median((times[:, 2] - times[:, 1]) / args.chunk)),
+            "chunk_seconds": times.tolist()}
+
+
+def render_markdown(r: dict[str, Any]) -> str:
+    """The rendering row (see the module docstring)."""
+    return ("\n| 64x64 perspective | bare env steps/s | pose-wrapped, render_mode=None | "
+            "wrapped / bare | rendering every step | ms per frame |\n|---|---:|---:|---:|---:|---:|\n"
+            f"| oracle wrapper | {r['bare_steps_per_s']:.0f} | {r['wrapped_steps_per_s']:.0f} | "
+            f"{r['wrapped_ratio']:.2f} | {r['rendering_steps_per_s']:.0f} | "
+            f"{r['ms_per_frame']:.1f} |\n")
+
+
 def gl_renderer() -> str:
     try:
         from OpenGL import GL
@@ -212,12 +270,14 @@ def run_env_bench(args: EnvBenchConfig) -> list[dict[str, Any]]:
             r = rows[-1]
             print(f"{camera:>13s} {size:4d}px  env {r['env_steps_per_s']:7.0f}/s (best {r['env_best']:.0f})"
                   f"  raw {r['raw_steps_per_s']:7.0f}/s (best {r['raw_best']:.0f})  ratio {r['ratio']:.2f}", flush=True)
+    render = bench_render(args)
     meta["loadavg_end"] = [round(v, 2) for v in os.getloadavg()]
-    table = markdown(rows, meta)
+    table = markdown(rows, meta) + render_markdown(render)
     print("\n" + table)
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "bench_env.json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
+    (out / "bench_env.json").write_text(json.dumps({"meta": meta, "rows": rows,
+                                                    "render": render}, indent=2))
     (out / "bench_env.md").write_text(table)
     return rows
 
