@@ -47,6 +47,7 @@ from localization.workflows.benchmarks.filter import FilterBenchConfig
 from localization.workflows.benchmarks.global_loc import GlobalBenchConfig
 from localization.workflows.benchmarks.gse import GSEBenchConfig
 from localization.workflows.kidnap_eval import FILTERS
+from localization.workflows.sim import CONDITION_NAMES
 from localization.workflows.training import VEC_ENVS
 
 __all__ = ["Args", "check", "run"]
@@ -72,6 +73,8 @@ class Args:
 
 def _check_env_bench(c: EnvBenchConfig) -> None:
     check_int_list("env_sizes", c.sizes, minimum=1)
+    if c.conditions.strip():
+        check_choices("env_conditions", c.conditions, CONDITION_NAMES)
     check_numbers(c, positive=("steps", "chunk"), non_negative=("warmup", "scene_seed", "seed"),
                   prefix="env_")
     check_output_dir("env_out_dir", c.out_dir)
