@@ -51,7 +51,7 @@ from localization.workflows.benchmarks.filter import FilterBenchConfig
 from localization.workflows.benchmarks.global_loc import GlobalBenchConfig
 from localization.workflows.benchmarks.gse import GSEBenchConfig
 from localization.workflows.kidnap_eval import FILTERS
-from localization.workflows.sim import CONDITION_NAMES, NORMALIZATIONS
+from localization.workflows.sim import CONDITION_NAMES, LANE_SETS, NORMALIZATIONS
 from localization.workflows.training import VEC_ENVS
 
 __all__ = ["Args", "check", "run"]
@@ -133,6 +133,7 @@ def _check_appearance_bench(c: AppearanceBenchConfig) -> None:
     check_choices("appearance_conditions", c.conditions, CONDITION_NAMES)
     check_choices("appearance_trainings", c.trainings, TRAININGS)
     check_choice("appearance_normalize", c.normalize, NORMALIZATIONS)
+    check_choice("appearance_lanes", c.lanes, LANE_SETS)
     check_numbers(c, positive=("image_size", "n_train", "n_drive", "n_components", "n_test",
                                "n_drives", "drive_steps"),
                   non_negative=("motion_noise", "seed"), prefix="appearance_")

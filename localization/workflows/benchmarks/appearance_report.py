@@ -71,8 +71,14 @@ def markdown(result: dict[str, Any]) -> str:
     for training in result["trainings"]:
         ref = s[training].get("default")
         for condition in result["conditions"]:
+            if s[training][condition] is None:
+                lines.append(f"| {training} | {condition} | fit failed on every city |"
+                             + " |" * 6)
+                continue
             lines.append(_row(training, condition, s[training][condition], ref,
                               daylight_default))
+    for training, errors in result.get("fit_failures", {}).items():
+        lines += ["", f"{training}: the fit failed on " + "; ".join(errors)]
     lines += ["", ("Published context, not like-for-like (real photographs, 6-DoF poses, other "
               "methods), as hloc's README reports them for Aachen Day-Night (v1.0), within "
               "(0.25 m, 2°) / (0.5 m, 5°) / (5 m, 10°): SuperPoint + SuperGlue 89.6 / 95.4 / "
