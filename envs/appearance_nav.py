@@ -17,6 +17,8 @@ from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
 from envs.cameras import TopDownView, check_image_size, make_camera
+from envs.conditions import Conditions
+from envs.conditions_runtime import ConditionsRuntime
 from envs.lookalike import LookalikeCity, generate_lookalike_city
 from envs.motion_model import UnicycleModel, wrap_angle
 from envs.robot import (
@@ -81,6 +83,12 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         along x and y, and ``info["twins"]`` lists the true pose's twins.
     n_landmarks : int or None
         Landmark buildings (default 3 for "random", 2 for "lookalike").
+    conditions : None, str, dict or envs.conditions.Conditions
+        The look of the episodes (:mod:`envs.conditions`): None / "default" (today's look),
+        a preset ("dusk", "night", "overcast", "fog", "seasonal", "exposure", "noise",
+        "motion_blur", "traffic"), "random" (drawn per episode from the reset seed), or
+        ``{"preset": name, **fields}``. Vehicles and pedestrians move along the streets
+        (:mod:`envs.traffic`) and count as collisions when they touch the robot.
 
     Notes
     -----
@@ -94,7 +102,9 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
     ``collision`` (the robot touched a building or the city's invisible boundary wall
     during the step), ``distance_to_goal`` (m), ``control`` (the clipped U applied); with
     ``city_layout="lookalike"`` also ``twins`` (m, 3): the true pose's twin poses in the city
-    (:meth:`envs.lookalike.LookalikeCity.twins`).
+    (:meth:`envs.lookalike.LookalikeCity.twins`); ``conditions`` (dict): the episode's
+    conditions (:meth:`envs.conditions.Conditions.to_info`; ``holds`` lists those that
+    differ from today's look).
 
     Reward: decrease of the distance to the goal minus ``STEP_COST`` minus
     ``COLLISION_PENALTY`` on collision; terminated within ``GOAL_RADIUS`` of the goal.
@@ -124,6 +134,7 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         frame_skip: int = 10,
         city_layout: str = "random",
         n_landmarks: int | None = None,
+        conditions: object = None,
     ) -> None:
         self.image_size = check_image_size(image_size)
         self.motion_noise = check_real(motion_noise, "motion_noise", low=0.0)
@@ -143,11 +154,15 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
             n_landmarks = check_int(n_landmarks, "n_landmarks", low=0)
         self.city: City = self._make_city(scene_seed, city_size, block_size, street_width,
                                           n_landmarks)
-        self.model = mujoco.MjModel.from_xml_string(self.city.to_mjcf(ROBOT_XML, "", ACTUATOR_XML, SENSOR_XML))
+        self._conditions = ConditionsRuntime(conditions, self.city)
+        assets, bodies, sensors = self._conditions.xml()
+        self.model = mujoco.MjModel.from_xml_string(
+            self.city.to_mjcf(ROBOT_XML + bodies, assets, ACTUATOR_XML, SENSOR_XML + sensors))
         self.city.paint_textures(self.model)
         self.data = mujoco.MjData(self.model)
         self.dt = self.model.opt.timestep * self.frame_skip
         self.motion_model = UnicycleModel(self.dt)
+        self._conditions.bind(self.model)  # paints its textures: before the camera uploads them
         self.camera_name = camera
         self._camera = make_camera(camera, self.model, self.image_size)
         self._top_down: TopDownView | None = None
@@ -176,7 +191,8 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
 
     def _init_ids(self) -> None:
         m = self.model
-        self._root_qpos = m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "root")]
+        root = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "root")
+        self._root_qpos, self._root_dof = m.jnt_qposadr[root], m.jnt_dofadr[root]
         self._goal_mocap = m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "goal")]
         sensor = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, "collision")
         self._collision_adr = m.sensor_adr[sensor]
@@ -198,6 +214,7 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         seed = check_seed(seed, "seed", optional=True)
         options = check_options(options, "options", RESET_OPTIONS)
         super().reset(seed=seed)
+        self._conditions.new_episode(seed)
         mujoco.mj_resetData(self.model, self.data)
         if options.get("pose") is not None:
             pose = self._check_point(options["pose"], 3, "pose", ROBOT_RADIUS)
@@ -208,6 +225,7 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         else:
             self._goal = self._random_goal(pose[:2])
         self.data.mocap_pos[self._goal_mocap, :2] = self._goal
+        self._conditions.draw(self.data, [self._camera], pose[:2])
         self.set_pose(pose)
         self._steps = 0
         self._distance = self._distance_to_goal()
@@ -217,10 +235,13 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         """Apply ``U = [v, w]`` for ``dt`` seconds (see the class notes for clipping and errors)."""
         u = self._check_action(action)
         self.data.ctrl[:] = self._wheel_speeds(u)
+        if self._conditions.traffic is not None:
+            self._conditions.advance(self.data, self.dt, self.pose[:2])
         collision = False
         for _ in range(self.frame_skip):  # the contact sensor sees the state at the start of each substep
             mujoco.mj_step(self.model, self.data)
-            collision = collision or self.data.sensordata[self._collision_adr] > 0
+            collision = (collision or self.data.sensordata[self._collision_adr] > 0
+                         or self._conditions.hit(self.data))
         self._sync_kinematics()
         self._steps += 1
         pose = self.pose
@@ -276,8 +297,52 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         return top_down_map(self.city)
 
     def render_camera(self) -> NDArray[np.uint8]:
-        """Return the camera image at the current state, (H, W, 3) uint8."""
-        return self._camera.render(self.data)
+        """Return the camera image at the current state, (H, W, 3) uint8 (with the
+        conditions' camera effects: motion blur at the robot's speed, exposure, noise)."""
+        if self._conditions.lamps_on:
+            self._conditions.place_lamp_heads(self.data, self.pose)
+        image = self._camera.render(self.data)
+        if not self._conditions.current.has_camera_effects:
+            return image
+        v = self.data.qvel[self._root_dof : self._root_dof + 2]
+        return self._conditions.camera_image(image, math.hypot(v[0], v[1]),
+                                             float(self.data.qvel[self._root_dof + 5]))
+
+    # ------------------------------------------------------------------ conditions
+    @property
+    def conditions(self) -> Conditions:
+        """The conditions of the current episode (:class:`envs.conditions.Conditions`)."""
+        return self._conditions.current
+
+    @property
+    def randomised_conditions(self) -> bool:
+        """Whether every episode draws its own conditions (``conditions="random"``)."""
+        return self._conditions.spec.random
+
+    @property
+    def traffic(self) -> Any:
+        """The vehicles and pedestrians (:class:`envs.traffic.Traffic`), or None."""
+        return self._conditions.traffic
+
+    def set_conditions(self, conditions: Conditions | None = None) -> Conditions:
+        """Change the look now: ``conditions`` (a :class:`~envs.conditions.Conditions`), or
+        the next draw of the env's conditions (a new random look for ``conditions="random"``,
+        from the episode's stream). Traffic is spawned anew away from the robot. Call after
+        ``reset``; returns the conditions applied.
+
+        Raises
+        ------
+        ValueError
+            If the env was made without conditions, or ``conditions`` needs street lamps or
+            more movers than the env was made with.
+        """
+        rt = self._conditions
+        if conditions is None:
+            rt.draw(self.data, [self._camera], self.pose[:2])
+        else:
+            rt.apply(conditions, self.data, [self._camera], self.pose[:2])
+        mujoco.mj_forward(self.model, self.data)
+        return rt.current
 
     # ------------------------------------------------------------------ helpers
     def _sync_kinematics(self) -> None:
@@ -287,7 +352,7 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         mujoco.mj_camlight(self.model, self.data)
 
     def _obs(self) -> Obs:
-        return {"image": self._camera.render(self.data), "goal": self._goal.astype(np.float32)}
+        return {"image": self.render_camera(), "goal": self._goal.astype(np.float32)}
 
     def _info(self, collision: bool, control: NDArray[np.float64], pose: NDArray[np.float64] | None = None
               ) -> dict[str, Any]:
@@ -297,6 +362,7 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
             "collision": bool(collision),
             "distance_to_goal": math.hypot(pose[0] - self._goal[0], pose[1] - self._goal[1]),
             "control": np.asarray(control, dtype=np.float64),
+            "conditions": dict(self._conditions.info),
         }
         if isinstance(self.city, LookalikeCity):
             info["twins"] = self.city.twins(pose)

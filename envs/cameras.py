@@ -99,6 +99,12 @@ class PerspectiveCamera:
         self._renderer.update_scene(data, camera=self.camera_id)
         return self._renderer.render()
 
+    def gl_targets(self) -> list[tuple[mujoco.MjvScene, mujoco.MjrContext]]:
+        """The (scene, GL context) pairs it renders with (``envs.lighting`` sets their fog)."""
+        if self._renderer is None:
+            raise RuntimeError("camera is closed")
+        return [(self._renderer.scene, self._renderer._mjr_context)]
+
     def close(self) -> None:
         """Free the GL context (idempotent)."""
         if self._renderer is not None:

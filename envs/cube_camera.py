@@ -194,6 +194,12 @@ class CubeMapCamera:
         """The ``mjvScene`` rendered (its ``flags`` persist across frames)."""
         return self._scene
 
+    def gl_targets(self) -> list[tuple[mujoco.MjvScene, mujoco.MjrContext]]:
+        """The (scene, GL context) pair it renders with (``envs.lighting`` sets their fog)."""
+        if self._con is None:
+            raise RuntimeError("camera is closed")
+        return [(self._scene, self._con)]
+
     @property
     def mask(self) -> NDArray[np.bool_]:
         """(H, W) bool: the pixels that see the scene (disc or annulus)."""

@@ -138,10 +138,12 @@ class PurePursuit:
         return np.array([v, w])
 
 
-def _drive_into(base: Any, pose: NDArray[np.float64], curvature: float, steps: int
-                ) -> tuple[NDArray[np.uint8], NDArray[np.float64]]:
+def _drive_into(base: Any, pose: NDArray[np.float64], curvature: float, steps: int,
+                placed: Any = None) -> tuple[NDArray[np.uint8], NDArray[np.float64]]:
     """Place the robot ``steps`` env steps back along an arc of ``curvature`` at cruise speed
-    (body and wheels moving), drive ``[v, v * curvature]`` into ``pose``; image and true pose."""
+    (body and wheels moving), drive ``[v, v * curvature]`` into ``pose``; image and true pose.
+    ``placed()`` (optional) runs once the robot is at its start (a new look, its traffic
+    spawned away from the robot there)."""
     v, w = CRUISE_SPEED, CRUISE_SPEED * curvature
     back = steps * base.dt
     yaw0 = pose[2] - w * back
@@ -151,6 +153,8 @@ def _drive_into(base: Any, pose: NDArray[np.float64], curvature: float, steps: i
     else:
         start = pose[:2] - v * back * np.array([np.cos(yaw0), np.sin(yaw0)])
     base.set_pose([start[0], start[1], yaw0])
+    if placed is not None:
+        placed()
     m, d = base.model, base.data
     root = m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "root")]
     d.qvel[root:root + 3] = [v * np.cos(yaw0), v * np.sin(yaw0), 0.0]
@@ -192,7 +196,10 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
         the sampled ones).
 
     The env's state is changed (teleports, or a reset and a drive for "route"): reset it
-    before running episodes on it.
+    before running episodes on it. An env made with randomised conditions
+    (``conditions="random"``) is reset with ``seed`` and, except for "route" (one drive, one
+    look), every sample gets its own look (``env.set_conditions()``), so the dataset covers
+    the randomisation.
 
     Returns
     -------
@@ -212,6 +219,10 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
     images = np.empty((n, *base.image_size, 3), np.uint8)
     poses = np.empty((n, 3))
     bar = tqdm(total=n, desc=f"collect {mode}", disable=not progress, leave=False)
+    vary = bool(getattr(base, "randomised_conditions", False))
+    redraw = base.set_conditions if vary else (lambda: None)
+    if vary and mode != "route":
+        base.reset(seed=seed)
     if mode == "route":
         pilot = PurePursuit(city.route(), w_max=base.W_MAX)
         obs, info = base.reset(seed=seed, options={"pose": pilot.start_pose()})
@@ -226,7 +237,7 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
                                         margin=POSE_MARGIN, **lane_options)
         base.reset(seed=seed)  # seeds the motion noise of the drive-in
         for i, (target, k) in enumerate(zip(targets, curvature)):
-            images[i], poses[i] = _drive_into(base, target, k, ROLL_STEPS)
+            images[i], poses[i] = _drive_into(base, target, k, ROLL_STEPS, redraw)
             bar.update()
     else:
         if mode == "grid":
@@ -236,6 +247,7 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
             targets = np.array([city.random_free_pose(rng, POSE_MARGIN) for _ in range(n)])
         for i, target in enumerate(targets):
             base.set_pose(target)
+            redraw()
             images[i], poses[i] = base.render_camera(), base.pose
             bar.update()
     bar.close()

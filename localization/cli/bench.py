@@ -14,7 +14,10 @@ markdown table (``make bench`` runs them all).
 - agents: PPO on the belief against PPO on the true pose, same budget (needs the localizer
   ``make demo`` writes; ``<agents-out>/bench_agents.json`` / ``.md``);
 - global: kidnapping recovery, global start, the look-alike city, nominal tracking and cost
-  of the pose filters side by side (``<global-out-dir>/bench_global.json`` / ``.md``).
+  of the pose filters side by side (``<global-out-dir>/bench_global.json`` / ``.md``);
+- appearance: single-image and closed-loop localization under every conditions preset, for
+  a localizer trained on daylight and one on randomised conditions
+  (``<appearance-out-dir>/bench_appearance.json`` / ``.md``).
 
 Each benchmark's own options are ``--<benchmark>-<option>`` (listed below); they are checked
 for every benchmark chosen by ``--only`` before the first one starts.
@@ -42,11 +45,13 @@ from localization.cli._args import (
 )
 from localization.workflows.benchmarks import BENCHMARKS, benchmark
 from localization.workflows.benchmarks.agents import AgentsBenchConfig
+from localization.workflows.benchmarks.appearance import TRAININGS, AppearanceBenchConfig
 from localization.workflows.benchmarks.env import EnvBenchConfig
 from localization.workflows.benchmarks.filter import FilterBenchConfig
 from localization.workflows.benchmarks.global_loc import GlobalBenchConfig
 from localization.workflows.benchmarks.gse import GSEBenchConfig
 from localization.workflows.kidnap_eval import FILTERS
+from localization.workflows.sim import CONDITION_NAMES, LANE_SETS, NORMALIZATIONS
 from localization.workflows.training import VEC_ENVS
 
 __all__ = ["Args", "check", "run"]
@@ -68,10 +73,14 @@ class Args:
         "help": "PPO on the belief vs on the true pose"})
     global_: GlobalBenchConfig = field(default_factory=GlobalBenchConfig, metadata={
         "help": "kidnapping, global start, look-alike city: the filters side by side"})
+    appearance: AppearanceBenchConfig = field(default_factory=AppearanceBenchConfig, metadata={
+        "help": "localization under lighting, weather, camera effects and traffic"})
 
 
 def _check_env_bench(c: EnvBenchConfig) -> None:
     check_int_list("env_sizes", c.sizes, minimum=1)
+    if c.conditions.strip():
+        check_choices("env_conditions", c.conditions, CONDITION_NAMES)
     check_numbers(c, positive=("steps", "chunk"), non_negative=("warmup", "scene_seed", "seed"),
                   prefix="env_")
     check_output_dir("env_out_dir", c.out_dir)
@@ -119,8 +128,21 @@ def _check_global_bench(c: GlobalBenchConfig) -> None:
     check_output_dir("global_out_dir", c.out_dir)
 
 
+def _check_appearance_bench(c: AppearanceBenchConfig) -> None:
+    check_int_list("appearance_cities", c.cities, minimum=0)
+    check_choices("appearance_conditions", c.conditions, CONDITION_NAMES)
+    check_choices("appearance_trainings", c.trainings, TRAININGS)
+    check_choice("appearance_normalize", c.normalize, NORMALIZATIONS)
+    check_choice("appearance_lanes", c.lanes, LANE_SETS)
+    check_numbers(c, positive=("image_size", "n_train", "n_drive", "n_components", "n_test",
+                               "n_drives", "drive_steps"),
+                  non_negative=("motion_noise", "seed"), prefix="appearance_")
+    check_output_dir("appearance_out_dir", c.out_dir)
+
+
 CHECKS = {"env": _check_env_bench, "gse": _check_gse_bench, "filter": _check_filter_bench,
-          "agents": _check_agents_bench, "global": _check_global_bench}
+          "agents": _check_agents_bench, "global": _check_global_bench,
+          "appearance": _check_appearance_bench}
 
 
 def _config(args: Args, name: str) -> object:

@@ -2,6 +2,7 @@
 
     appearance-nav collect --mode grid --n 2000 --out data/grid_seed0.npz
     appearance-nav collect --mode route --n 3000 --motion-noise 0.05 --camera fisheye
+    appearance-nav collect --mode lanes --n 4000 --conditions random   # a look per image
 
 The file holds ``images`` (n, H, W, 3) uint8, ``poses`` (n, 3) float64 ``[x, y, yaw]`` and
 ``meta`` (a JSON string with these options); read it with ``envs.load_dataset``.
@@ -12,7 +13,7 @@ from __future__ import annotations
 # isort: split
 from localization.cli._args import check_choice, check_env, check_numbers, check_output_file
 from localization.workflows.collect import CollectConfig, collect_out_path, collect_to_file
-from localization.workflows.sim import MODES
+from localization.workflows.sim import CONDITION_NAMES, MODES
 
 __all__ = ["Args", "check", "run"]
 
@@ -22,6 +23,7 @@ Args = CollectConfig
 def check(args: Args) -> None:
     """Every option is valid, and ``--out`` can be written (before anything is collected)."""
     check_choice("mode", args.mode, MODES)
+    check_choice("conditions", args.conditions, CONDITION_NAMES)
     check_env(args)
     check_numbers(args, positive=("n", "height", "width", "n_headings"),
                   non_negative=("seed",))

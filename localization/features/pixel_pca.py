@@ -1,4 +1,6 @@
-"""PixelPCA: raw pixels in [0, 1] -> PCA, the classical appearance-based baseline."""
+"""PixelPCA: raw pixels in [0, 1] -> PCA, the classical appearance-based baseline, with an
+optional per-image illumination normalisation (issue 14: the same place at dusk, at night or
+over-exposed should give nearby features)."""
 
 from __future__ import annotations
 
@@ -6,11 +8,48 @@ from typing import Any
 
 import numpy as np
 
-from localization._validation import check_int
+from localization._validation import check_choice, check_int
 from localization.features._pca import fit_pca, pca_from_state, pca_state
 from localization.features.base import FeatureExtractor
 
-__all__ = ["PixelPCA"]
+__all__ = ["NORMALIZATIONS", "PixelPCA", "normalize_pixels"]
+
+#: the values of ``PixelPCA(normalize=...)``
+NORMALIZATIONS = ("none", "standardize", "channels", "equalize")
+_EPS = np.float32(1e-3)
+
+
+def normalize_pixels(x: np.ndarray, how: str, channels: int) -> np.ndarray:
+    """Per-image illumination normalisation of pixel rows.
+
+    Parameters
+    ----------
+    x : (n, P) float32 — each row one image's pixels in [0, 1], channel fastest
+        (P = pixels * channels).
+    how : one of :data:`NORMALIZATIONS`
+        "none": unchanged; "standardize": minus the image's mean, over its standard deviation
+        (a global gain and offset cancel: exposure, dimmer light); "channels": the same per
+        colour channel (also a colour cast cancels: dusk, seasons); "equalize": every channel
+        replaced by the ranks of its values scaled to [0, 1] (histogram equalisation: any
+        increasing change of brightness cancels), then standardized.
+    channels : int — 3 for colour, 1 for grey.
+
+    Returns
+    -------
+    (n, P) float32
+    """
+    if how == "none":
+        return x
+    n = len(x)
+    if how == "standardize":
+        z = x - x.mean(axis=1, keepdims=True)
+        return z / (z.std(axis=1, keepdims=True) + _EPS)
+    c = x.reshape(n, -1, channels)
+    if how == "equalize":
+        ranks = np.argsort(np.argsort(c, axis=1, kind="stable"), axis=1, kind="stable")
+        c = ranks.astype(np.float32) / np.float32(max(c.shape[1] - 1, 1))
+    z = c - c.mean(axis=1, keepdims=True)
+    return (z / (z.std(axis=1, keepdims=True) + _EPS)).reshape(n, -1)
 
 
 class PixelPCA(FeatureExtractor):
@@ -29,6 +68,9 @@ class PixelPCA(FeatureExtractor):
     mask : array_like of bool, shape (H, W), or None
         Use only these pixels (e.g. those looking above the near ground, whose texture
         moves fast and repeats); None uses all.
+    normalize : {"none", "standardize", "channels", "equalize"}
+        Per-image illumination normalisation of the (masked) pixels before the PCA
+        (:func:`normalize_pixels`); "none" (default) keeps the raw pixels.
 
     Attributes
     ----------
@@ -41,12 +83,14 @@ class PixelPCA(FeatureExtractor):
     name = "pixel_pca"
 
     def __init__(self, n_components: int = 64, grayscale: bool = False, whiten: bool = False,
-                 random_state: int | None = 0, mask: Any = None) -> None:
+                 random_state: int | None = 0, mask: Any = None,
+                 normalize: str = "none") -> None:
         self.n_components = n_components
         self.grayscale = grayscale
         self.whiten = whiten
         self.random_state = random_state
         self.mask = mask
+        self.normalize = normalize
 
     def _pixels(self, images: np.ndarray) -> np.ndarray:
         if self.mask is not None:
@@ -58,10 +102,12 @@ class PixelPCA(FeatureExtractor):
         x = images.astype(np.float32) / np.float32(255.0)
         if self.grayscale:
             x = x @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
-        return x.reshape(len(x), -1)
+        return normalize_pixels(x.reshape(len(x), -1), self.normalize,
+                                1 if self.grayscale else 3)
 
     def _fit(self, images: np.ndarray, y: Any = None) -> None:
         check_int(self.n_components, "n_components", low=1)
+        check_choice(self.normalize, "normalize", NORMALIZATIONS)
         self.pca_ = fit_pca(self._pixels(images), self.n_components, self.whiten,
                             self.random_state)
 

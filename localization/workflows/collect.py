@@ -36,6 +36,10 @@ class CollectConfig:
         "help": "headings per grid position (grid mode)"})
     motion_noise: float = field(default=0.0, metadata={
         "help": "actuation noise scale (route mode)"})
+    conditions: str = field(default="default", metadata={
+        "help": "the look (envs.conditions): a preset (dusk, night, overcast, fog, seasonal, "
+                "exposure, noise, motion_blur, traffic) or 'random' (every sample its own look "
+                "except in route mode: randomised training data)"})
     out: str = field(default="", metadata={
         "help": "output .npz (default data/<mode>_scene<scene_seed>_<camera>.npz)"})
 
@@ -50,7 +54,8 @@ def collect_to_file(args: CollectConfig) -> Path:
     """Collect ``args.n`` images and poses (progress bar) and save them; returns the file."""
     out = collect_out_path(args)
     env = gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, camera=args.camera,
-                   image_size=(args.height, args.width), motion_noise=args.motion_noise)
+                   image_size=(args.height, args.width), motion_noise=args.motion_noise,
+                   conditions=args.conditions)
     t0 = time.perf_counter()
     images, poses = envs.collect_dataset(env, args.n, args.mode, seed=args.seed,
                                          n_headings=args.n_headings)

@@ -1,4 +1,5 @@
-"""The simulator's names the command line needs (camera, dataset-mode and lane-set choices),
+"""The simulator's names the command line needs (camera, dataset-mode, lane-set and
+conditions choices, and PixelPCA's normalisations, which the appearance benchmark offers),
 through the workflow layer: the one layer of :mod:`localization` that imports :mod:`envs`.
 
 Importing this module imports :mod:`envs` first, so ``envs._gl`` chooses ``MUJOCO_GL``
@@ -8,9 +9,13 @@ before MuJoCo is imported.
 from __future__ import annotations
 
 import envs
+from envs.conditions import PRESETS
 from envs.datasets import MODES
 from envs.lanes import LANE_SETS
+from localization.features.pixel_pca import NORMALIZATIONS
 
-__all__ = ["CAMERAS", "LANE_SETS", "MODES"]
+__all__ = ["CAMERAS", "CONDITION_NAMES", "LANE_SETS", "MODES", "NORMALIZATIONS"]
 
 CAMERAS = envs.CAMERAS
+#: the names ``conditions=`` takes: the presets and "random"
+CONDITION_NAMES = (*PRESETS, "random")

@@ -200,6 +200,29 @@ for method in ("predict", "jacobian_pose", "jacobian_control"):
                           lambda ctx, name=method, p=pose, c=u: getattr(F, name)(p, c), exc, m))
 
 
+# ---------------------------------------------------------------- conditions
+for i, (bad, exc, m) in enumerate([
+        ("dawn", V, "preset"), ("Night", V, "preset"), ("", V, "preset"), (3, T, "conditions"),
+        (["night"], T, "conditions"), ({"preset": "dawn"}, V, "preset"),
+        ({"preset": 1}, T, "preset"), ({"preset": "night", "fogg": (1, 2)}, V, "fogg"),
+        ({"noise": -0.1}, V, "noise"), ({"noise": "0.1"}, T, "noise"),
+        ({"noise": np.nan}, V, "noise"), ({"vehicles": 100}, V, "vehicles"),
+        ({"vehicles": 1.5}, T, "vehicles"), ({"pedestrians": -1}, V, "pedestrians"),
+        ({"fog": (5.0, 2.0)}, V, "fog"), ({"fog": (1.0,)}, V, "fog"),
+        ({"sun": [1.0, 2.0]}, V, "sun"), ({"sun": [3.0, 0.0, 0.0]}, V, "sun"),
+        ({"sun_direction": [0, 0, 0]}, V, "sun_direction"), ({"exposure": 0.0}, V, "exposure"),
+        ({"ground": ["a", "b", "c"]}, T, "ground"), ({"season": 0.5}, T, "season"),
+        ({"preset": "random", "lamps": 5.0}, V, "lamps"), ({1: 2}, V, "conditions")]):
+    CASES.append(Case(f"make-conditions-{i}", make(conditions=bad), exc, m))
+CASES += [
+    Case("set_conditions-default-env",
+         lambda ctx: ctx.env.unwrapped.set_conditions(envs.conditions.PRESETS["night"]), V,
+         "without conditions"),
+    Case("set_conditions-type", lambda ctx: ctx.env.unwrapped.set_conditions("night"), T,
+         "Conditions"),
+]
+
+
 @pytest.mark.parametrize("case", params(CASES))
 def test_bad_input_raises_a_clear_error(case, ctx):
     check(case, ctx)
@@ -257,3 +280,4 @@ def test_metrics_name_a_bad_estimate(metric, bad, exc):
 
     with pytest.raises(exc, match="theta_hat"):
         getattr(metrics, metric)(bad, np.array([0.1, 0.5, 0.9]))
+

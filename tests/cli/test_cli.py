@@ -80,6 +80,7 @@ BAD = [
     ("collect --n-headings 0", "--n-headings"),
     ("collect --seed -1", "--seed"),
     ("collect --motion-noise inf", "--motion-noise"),
+    ("collect --conditions dawn", "--conditions"),
     ("collect --out {dir}", "--out"),
     ("collect --out {file}/data.npz", "--out"),
     ("collect --out {dir}/new/", "--out"),

@@ -6,7 +6,10 @@ in one run, each writing JSON and a markdown table.
 - :mod:`.filter`: the belief wrapper's per-step cost and closed-loop tracking accuracy;
 - :mod:`.agents`: PPO on the belief against PPO on the true pose;
 - :mod:`.global_loc`: kidnapping, global start, the look-alike city, nominal tracking and
-  cost of every pose filter side by side.
+  cost of every pose filter side by side;
+- :mod:`.appearance`: single-image and closed-loop localization under every conditions
+  preset (lighting, weather, camera effects, moving things), for a localizer trained on the
+  default look and one trained on randomised conditions.
 
 :data:`BENCHMARKS` maps each name to its module, settings class and run function; modules
 load on first use.
@@ -27,6 +30,7 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "filter": ("filter", "FilterBenchConfig", "run_filter_bench"),
     "agents": ("agents", "AgentsBenchConfig", "run_agents_bench"),
     "global": ("global_loc", "GlobalBenchConfig", "run_global_bench"),
+    "appearance": ("appearance", "AppearanceBenchConfig", "run_appearance_bench"),
 }
 
 

@@ -26,6 +26,12 @@ that wrapper with ``render_mode="rgb_array"`` calling ``render()`` after every s
 ``RecordVideo`` does), alternating in chunks as above. Nobody rendering must cost nothing:
 wrapped / bare is the pose wrapper's whole overhead (its render bookkeeping is two reference
 stores a step); the third loop gives the cost of a frame when one is asked for.
+
+Conditions (issue 14): for every preset of ``conditions`` (``envs.conditions``), the env made
+with it against the env made without, 64x64 perspective, the same random actions, chunks
+alternating as above; ratio = median over chunk pairs of default time / preset time.
+Target: >= 0.8 for every preset without moving objects; "traffic" (6 vehicles and 6
+pedestrians) reports the cost of moving objects.
 """
 
 from __future__ import annotations
@@ -67,6 +73,10 @@ class EnvBenchConfig:
     scene_seed: int = field(default=0, metadata={"help": "city of the benchmark"})
     seed: int = field(default=0, metadata={"help": "seed of the random policy"})
     cameras: bool = field(default=False, metadata={"help": "loop over every registered camera, not just perspective"})
+    conditions: str = field(default="dusk,night,overcast,fog,seasonal,exposure,noise,motion_blur,"
+                                    "random,traffic", metadata={
+        "help": "comma-separated condition presets timed against the default look at 64x64 "
+                "('' for none)"})
     quick: bool = field(default=False, metadata={"help": "smoke run: 64 px, 400 steps in chunks of 50"})
     out_dir: str = field(default="results", metadata={"help": "where bench_env.json / bench_env.md go"})
 
@@ -215,6 +225,48 @@ def render_markdown(r: dict[str, Any]) -> str:
             f"{r['ms_per_frame']:.1f} |\n")
 
 
+def bench_condition(preset: str, args: EnvBenchConfig, size: int = 64) -> dict[str, Any]:
+    """The env with conditions ``preset`` against the default env, chunks alternating."""
+    def make(conditions: str | None) -> gym.Env:
+        return gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, image_size=(size, size),
+                        max_episode_steps=10**9, conditions=conditions)
+
+    base, env = make(None), make(preset)
+    base.action_space.seed(args.seed)
+    actions = np.array([base.action_space.sample() for _ in range(args.warmup + args.steps)])
+    loops = []
+    for e in (base, env):
+        e.reset(seed=args.seed)
+        loops.append(EnvLoop(e, actions))
+        loops[-1].run(args.warmup)
+    base_t, env_t = [], []
+    for _ in range(max(1, args.steps // args.chunk)):
+        base_t.append(loops[0].run(args.chunk))
+        env_t.append(loops[1].run(args.chunk))
+    moving = bool(env.unwrapped.traffic is not None)
+    base.close()
+    env.close()
+    base_t, env_t = np.array(base_t), np.array(env_t)
+    return {"preset": preset, "size": size, "moving_objects": moving,
+            "env_steps_per_s": float(np.median(args.chunk / env_t)),
+            "default_steps_per_s": float(np.median(args.chunk / base_t)),
+            "ratio": float(np.median(base_t / env_t)),
+            "env_chunk_seconds": env_t.tolist(), "default_chunk_seconds": base_t.tolist()}
+
+
+def conditions_markdown(rows: list[dict[str, Any]]) -> str:
+    """The conditions table (preset, steps/s with and without, ratio, target)."""
+    lines = ["", "## Conditions (64x64 perspective, against the default look)", "",
+             "| conditions | steps/s | default steps/s | preset/default | >= 0.8x |",
+             "|---|---:|---:|---:|---|"]
+    for r in rows:
+        mark = ("(moving objects: no target)" if r["moving_objects"] else
+                "PASS" if r["ratio"] >= TARGET_RATIO else "MISS")
+        lines.append(f"| {r['preset']} | {r['env_steps_per_s']:.0f} | "
+                     f"{r['default_steps_per_s']:.0f} | {r['ratio']:.2f} | {mark} |")
+    return "\n".join(lines) + "\n"
+
+
 def gl_renderer() -> str:
     try:
         from OpenGL import GL
@@ -271,13 +323,21 @@ def run_env_bench(args: EnvBenchConfig) -> list[dict[str, Any]]:
             print(f"{camera:>13s} {size:4d}px  env {r['env_steps_per_s']:7.0f}/s (best {r['env_best']:.0f})"
                   f"  raw {r['raw_steps_per_s']:7.0f}/s (best {r['raw_best']:.0f})  ratio {r['ratio']:.2f}", flush=True)
     render = bench_render(args)
+    cond_rows = []
+    for preset in [p for p in args.conditions.split(",") if p.strip()]:
+        cond_rows.append(bench_condition(preset.strip(), args))
+        r = cond_rows[-1]
+        print(f"{r['preset']:>13s}   64px  env {r['env_steps_per_s']:7.0f}/s  default "
+              f"{r['default_steps_per_s']:7.0f}/s  ratio {r['ratio']:.2f}", flush=True)
     meta["loadavg_end"] = [round(v, 2) for v in os.getloadavg()]
-    table = markdown(rows, meta) + render_markdown(render)
+    table = (markdown(rows, meta) + render_markdown(render)
+             + (conditions_markdown(cond_rows) if cond_rows else ""))
     print("\n" + table)
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "bench_env.json").write_text(json.dumps({"meta": meta, "rows": rows,
-                                                    "render": render}, indent=2))
+                                                    "render": render,
+                                                    "conditions": cond_rows}, indent=2))
     (out / "bench_env.md").write_text(table)
     return rows
 

@@ -1,0 +1,87 @@
+"""The appearance benchmark: its scores on hand-made inputs, its options, a quick run."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from localization.cli._args import UsageError
+from localization.cli.bench import Args, check
+from localization.workflows.benchmarks import BENCHMARKS, benchmark
+from localization.workflows.benchmarks.appearance import (
+    AppearanceBenchConfig,
+    run_appearance_bench,
+    single_image_scores,
+)
+from localization.workflows.benchmarks.appearance_report import single_target
+
+
+class Fixed:
+    """A 'localizer' whose psi* returns given poses."""
+
+    def __init__(self, pred):
+        self.pred = np.asarray(pred, dtype=float)
+
+    def predict(self, images):
+        return self.pred
+
+
+def test_single_image_scores_use_both_thresholds_and_count_misses():
+    truth = np.zeros((5, 3))
+    pred = np.array([[0.2, 0, np.radians(1.0)],   # within all three
+                     [0.2, 0, np.radians(3.0)],   # heading too far for (0.25 m, 2 deg)
+                     [0.4, 0, 0.0],               # (0.5 m, 5 deg) and (5 m, 10 deg)
+                     [4.0, 0, np.radians(9.0)],   # (5 m, 10 deg) only
+                     [np.nan, np.nan, np.nan]])   # outside the domain: a miss
+    s = single_image_scores(Fixed(pred), None, truth)
+    assert s["within"] == pytest.approx([0.2, 0.6, 0.8])
+    assert math.isinf(s["pos_err"][4])
+
+
+def test_targets_are_the_issues():
+    assert single_target("daylight", "dusk") == (0.75, 0.90, 0.99)
+    assert single_target("daylight", "night") == (0.50, 0.75, 0.95)
+    assert single_target("daylight", "fog") is None
+    assert single_target("randomised", "fog") == (0.80, 0.92, 0.99)
+
+
+@pytest.mark.parametrize("field, value, option", [
+    ("conditions", "default,dawn", "--appearance-conditions"),
+    ("trainings", "daylight,nightly", "--appearance-trainings"),
+    ("normalize", "gamma", "--appearance-normalize"),
+    ("cities", "31,x", "--appearance-cities"),
+    ("n_test", 0, "--appearance-n-test"),
+])
+def test_bad_options_are_named(field, value, option):
+    args = Args(only="appearance", appearance=AppearanceBenchConfig(**{field: value}))
+    with pytest.raises(UsageError, match=option):
+        check(args)
+
+
+def test_registered_for_bench_only_appearance():
+    config, run = benchmark("appearance")
+    assert "appearance" in BENCHMARKS
+    assert config is AppearanceBenchConfig and run is run_appearance_bench
+
+
+def test_quick_run_end_to_end(tmp_path: Path):
+    run_appearance_bench(AppearanceBenchConfig(quick=True, conditions="default,traffic",
+                                               out_dir=str(tmp_path)))
+    saved = json.loads((tmp_path / "bench_appearance.json").read_text())
+    table = (tmp_path / "bench_appearance.md").read_text()
+    assert saved["trainings"] == ["daylight", "randomised"]
+    for t in saved["trainings"]:
+        for c in ("default", "traffic"):
+            s = saved["summary"][t][c]
+            assert s["n_images"] == 30 and s["drives"] == 1
+            assert all(0.0 <= v <= 1.0 for v in s["within"])
+            assert s["within"] == sorted(s["within"])  # looser thresholds, more images
+            assert math.isfinite(s["rmse"]) and s["rmse"] > 0
+            assert f"| {t} | {c} |" in table
+        assert saved["summary"][t]["default"]["occluded_frames"] == 0.0
+        assert saved["summary"][t]["traffic"]["occluded_frames"] > 0.0  # movers were seen
+    assert "Aachen Day-Night" in table
