@@ -95,7 +95,7 @@ def test_closed_loop_under_sensor_noise_holds(city, runs):
     0.04-0.14 m, largest error 0.90 m, mean NEES 2.1-7.5 per run, 98-100 % accepted. Targets
     (the issue's closed-loop ones): RMSE <= 2x the daylight RMSE of the same drive, mean NEES
     in the chi-square band."""
-    env, loc = city
+    _, loc = city
     noisy = gym.make("AppearanceNav-v0", scene_seed=CITY, motion_noise=0.1,
                      max_episode_steps=None, conditions="noise")
     metrics = [track_metrics(track_route(noisy, loc, "representation", STEPS, start=s,
