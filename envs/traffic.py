@@ -5,8 +5,10 @@ follows a random street tour (:func:`envs.lanes.street_tour`): vehicles in the r
 lane ``VEHICLE_LANE`` m from the centre line, pedestrians along the street edge
 ``PEDESTRIAN_LANE`` m from it, on either side. They collide with the robot (it is pushed;
 a contact sensor per mover reports the hit, so ``info["collision"]`` is True), never with
-the buildings or each other. A mover waits while the robot stands right in its way, so the
-robot is hit when it drives into a mover, or a mover turns into it.
+the buildings or each other. A mover waits while the robot stands right in its way, but for
+``MAX_WAIT`` seconds at most (a robot pushing against a waiting car would otherwise stay stuck
+for ever): then it drives on, shoving the robot aside. So the robot is hit when it drives into
+a mover, when a mover turns into it, or when it blocks one for too long.
 
 Movers are spawned at reset from the env's conditions stream: never within
 ``SPAWN_CLEARANCE`` m of the robot's footprint (nor of another mover); a mover with no such
@@ -36,6 +38,7 @@ VEHICLE_SPEED = (0.5, 1.0)  # m/s
 PEDESTRIAN_SPEED = (0.2, 0.45)  # m/s
 SPAWN_CLEARANCE = 0.5  # m between the robot's footprint disc and a mover's
 SPAWN_TRIES = 200
+MAX_WAIT = 3.0  # s a mover waits for the robot to get out of its way
 TOUR_LENGTH = 600.0  # m: 10 minutes at 1 m/s; a mover stops at the end of its tour
 PATH_STEP = 0.05  # m between the resampled points of a tour
 _SAMPLES = round(TOUR_LENGTH / PATH_STEP) + 1
@@ -107,6 +110,7 @@ class Traffic:
         self._paths = np.zeros((n, _SAMPLES, 2))  # tours resampled every PATH_STEP metres
         self.s = np.zeros(n)  # arc length travelled (m)
         self.speed = np.zeros(n)
+        self.waited = np.zeros(n)  # seconds waited in a row for the robot
         self.poses = np.zeros((n, 3))
         self._z = np.where(self.kind == 0, VEHICLE_HALF[2], sum(PEDESTRIAN_SIZE)) + 0.01
         self._half = np.array([VEHICLE_HALF[:2] if k == 0 else (PEDESTRIAN_SIZE[0],) * 2
@@ -120,6 +124,7 @@ class Traffic:
         """Park every mover, then place ``n_vehicles`` vehicles and ``n_pedestrians``
         pedestrians (at most what the model holds) away from the robot and each other."""
         self.active[:] = False
+        self.waited[:] = 0.0
         self._model.geom_rgba[self.geom_ids, 3] = 0.0
         data.mocap_pos[self._mocap] = _PARKED
         want = {0: n_vehicles, 1: n_pedestrians}
@@ -175,8 +180,10 @@ class Traffic:
         rx, ry = robot_xy[0] - x, robot_xy[1] - y
         fwd, lat = rx * c + ry * s, -rx * s + ry * c
         half = self._half[idx]
-        wait = (fwd > 0) & (fwd < half[:, 0] + ROBOT_RADIUS + 0.4) & \
+        blocked = (fwd > 0) & (fwd < half[:, 0] + ROBOT_RADIUS + 0.4) & \
             (np.abs(lat) < half[:, 1] + ROBOT_RADIUS + 0.1)
+        wait = blocked & (self.waited[idx] < MAX_WAIT)
+        self.waited[idx] = np.where(blocked, self.waited[idx] + dt, 0.0)
         self.s[idx] = np.where(wait, self.s[idx], np.minimum(self.s[idx] + self.speed[idx] * dt,
                                                              TOUR_LENGTH))
         self.poses[idx] = self._pose_at(idx)

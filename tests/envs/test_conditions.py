@@ -210,3 +210,35 @@ def test_conditions_dataclass_info_is_json_able():
     info = Conditions(name="x", fog=(1.0, 5.0), vehicles=2).to_info()
     assert json.loads(json.dumps(info))["fog"] == [1.0, 5.0]
     assert set(info["holds"]) == {"fog", "vehicles"}
+
+
+@pytest.mark.parametrize("spec", ["night", "random", {"preset": "random", "vehicles": 3}])
+def test_todays_look_in_an_env_built_for_conditions_is_byte_identical(spec):
+    """Lamps and movers the model holds for other looks are not drawn in today's look, so a
+    daylight localizer sees only the conditions' own changes under any preset."""
+    plain, env = make(), make(spec)
+    plain.reset(seed=0, options={"pose": POSE})
+    env.reset(seed=0, options={"pose": POSE})
+    env.unwrapped.set_conditions(DEFAULT)
+    assert np.array_equal(plain.unwrapped.render_camera(), env.unwrapped.render_camera())
+    plain.close()
+    env.close()
+
+
+def test_a_mover_waits_for_the_robot_then_drives_on():
+    from envs.traffic import MAX_WAIT, VEHICLE_HALF
+
+    env = make({"preset": "traffic", "vehicles": 1, "pedestrians": 0})
+    base = env.unwrapped
+    env.reset(seed=2)
+    x, y, yaw = base.traffic.active_poses()[0]
+    ahead = VEHICLE_HALF[0] + ROBOT_RADIUS + 0.2
+    base.set_pose([x + ahead * np.cos(yaw), y + ahead * np.sin(yaw), yaw])
+    s0 = base.traffic.s[0]
+    for _ in range(int(MAX_WAIT / base.dt) - 2):
+        env.step([0.0, 0.0])
+    assert base.traffic.s[0] == s0  # it waits while the robot stands in its way
+    hits = [env.step([0.0, 0.0])[4]["collision"] for _ in range(20)]
+    assert base.traffic.s[0] > s0 + 0.3  # ... not for ever: it drives on
+    assert any(hits)  # shoving the robot aside
+    env.close()
