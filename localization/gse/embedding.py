@@ -40,7 +40,6 @@ from localization.gse.graph import (
     Array,
     brute_knn,
     check_connected,
-    knn_graph,
     local_pca,
     polar,
     same_side,
@@ -48,16 +47,20 @@ from localization.gse.graph import (
     symmetric_edges,
 )
 from localization.gse.jacobian_regression import jacobian_regression
+from localization.gse.neighbors import ALGORITHMS, HNSWIndex, knn_graph_any, use_approximate
+from localization.gse.solvers import laplacian_solve
 from localization.gse.validation import check_2d, validate_X
 
 __all__ = ["GrassmannStiefelEigenmaps", "align_frames", "embed_from_frames", "grassmann_kernel"]
 
-def embed_from_frames(Z: Array, H: Array, ei: Array, ej: Array, K: Array) -> Array:
+def embed_from_frames(Z: Array, H: Array, ei: Array, ej: Array, K: Array,
+                      amg: bool = False) -> Array:
     """Solve ``L Y = B`` (docs/method.md §6) for zero-mean coordinates Y (n, q).
 
     ``B_i = 1/2 sum_j K_ij (H_i + H_j)^T (Z_i - Z_j)``, computed with sparse
     products only; CG with a Jacobi preconditioner from zero (consistent
-    singular system on a connected graph).
+    singular system on a connected graph), or with ``amg=True`` (the scalable path)
+    AMG-preconditioned CG (:func:`~localization.gse.solvers.laplacian_solve`).
     """
     n, p, q = H.shape
     Ks = sparse.coo_matrix((K, (ei, ej)), shape=(n, n))
@@ -70,6 +73,8 @@ def embed_from_frames(Z: Array, H: Array, ei: Array, ej: Array, K: Array) -> Arr
                + np.einsum("npq,np->nq", KH, Z) - Ks @ HZ)
     B -= B.mean(axis=0)
     L = (sparse.diags(deg) - Ks).tocsr()
+    if amg:
+        return laplacian_solve(L, B)
     P = sparse.diags(1.0 / deg)
     Y = np.zeros((n, q))
     for c in range(q):
@@ -105,6 +110,12 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         the (normalised, nearest-neighbour dominated) estimate anyway.
     random_state : int, default=0
         Seed of the eigensolver start block.
+    algorithm : {"auto", "exact", "approximate"}, default="auto"
+        "exact": exact kNN graph and the eigensolvers above. "approximate" (the scalable
+        path, docs/method.md §17): faiss HNSW neighbours (exact distances re-ranked),
+        AMG-preconditioned LOBPCG for the alignment and AMG-preconditioned CG for the
+        embedding. "auto": "approximate" from
+        :data:`~localization.gse.neighbors.APPROXIMATE_MIN_N` samples on.
 
     Attributes
     ----------
@@ -124,6 +135,10 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         :meth:`select_recovery_bandwidth`).
     n_features_in_ : int
         Number of columns p of the sample.
+    algorithm_ : str
+        The path that ran: "exact" or "approximate".
+    neighbors_, neighbor_distances_ : ndarray of shape (n, k)
+        The kNN lists (ascending) the graph was built from (kept for :meth:`partial_fit`).
     """
 
     _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
@@ -137,13 +152,15 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         "min_kernel_sum": [Interval(Real, 0, None, closed="neither")],
         "out_of_domain": [StrOptions({"raise", "nan", "ignore"})],
         "random_state": [Interval(Integral, 0, None, closed="left")],
+        "algorithm": [StrOptions(set(ALGORITHMS))],
     }
 
     def __init__(self, n_components: int = 2, n_neighbors: int = 15,
                  bandwidth: float | str = "auto", grassmann_kernel: str = "binet_cauchy",
                  grassmann_threshold: float | None = None, n_refine: int = 5,
                  eigen_solver: str = "auto", min_kernel_sum: float = 1e-8,
-                 out_of_domain: str = "raise", random_state: int = 0) -> None:
+                 out_of_domain: str = "raise", random_state: int = 0,
+                 algorithm: str = "auto") -> None:
         self.n_components = n_components
         self.n_neighbors = n_neighbors
         self.bandwidth = bandwidth
@@ -154,6 +171,7 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         self.min_kernel_sum = min_kernel_sum
         self.out_of_domain = out_of_domain
         self.random_state = random_state
+        self.algorithm = algorithm
 
     def _check_params(self, n: int, p: int) -> None:
         """Checks that depend on the sample (the types and ranges are in
@@ -198,7 +216,10 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         n, p = Z.shape
         self._check_params(n, p)
         q, k = self.n_components, self.n_neighbors
-        dist, ind = knn_graph(Z, k)
+        approx = use_approximate(self.algorithm, n)
+        self.algorithm_ = "approximate" if approx else "exact"
+        dist, ind, self._index = knn_graph_any(Z, k, approx)
+        self.neighbors_, self.neighbor_distances_ = ind, dist
         sigma = (0.5 * float(np.median(dist[:, -1])) if self.bandwidth == "auto"
                  else float(self.bandwidth))
         if not sigma > 0:
@@ -233,12 +254,12 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
             H0 = landmark_frames(Z, Q, min(n // 2, 3000 // q), k, self.grassmann_kernel,
                                  self.random_state)
         H, lam, cond = align_frames(Q, ei, ej, K, self.n_refine, self.random_state,
-                                    dense_max, S, H0, lu_max)
+                                    dense_max, S, H0, lu_max, amg=approx)
         if lam[q] < 3.0 * lam[q - 1]:
             warnings.warn(f"weak alignment eigen-gap: lambda_(q+1)={lam[q]:.3g} < 3 x lambda_q="
                           f"{lam[q - 1]:.3g}; the frames may mix (disconnected or folded sample?)",
                           RuntimeWarning, stacklevel=2)
-        self.embedding_ = embed_from_frames(Z, H, ei, ej, K)
+        self.embedding_ = embed_from_frames(Z, H, ei, ej, K, amg=approx)
         self.Z_, self.tangents_, self.frames_ = Z, Q, H
         self.alignment_eigenvalues_, self.frame_condition_ = lam, cond
         self.bandwidth_, self.n_edges_ = sigma, len(ei)
@@ -250,6 +271,15 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         """Per-sample query structures (also rebuilt after loading)."""
         self._sqn = (self.Z_ ** 2).sum(axis=1)
         self._ytree = cKDTree(self.embedding_)
+        if getattr(self, "algorithm_", "exact") == "approximate" and getattr(
+                self, "_index", None) is None:
+            self._index = HNSWIndex(self.Z_)
+
+    def _query(self, z: Array, k: int) -> tuple[Array, Array]:
+        """k nearest samples of the rows of ``z`` (squared distances, indices)."""
+        if getattr(self, "_index", None) is not None:
+            return self._index.query(z, k)
+        return brute_knn(self.Z_, self._sqn, z, k)
 
     def fit_transform(self, Z: Array, y: None = None, cut: Array | None = None) -> Array:
         """Fit and return ``embedding_`` (n, q)."""
@@ -273,7 +303,7 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         out = np.empty((Z.shape[0], q))
         for s in range(0, Z.shape[0], _CHUNK):
             z = Z[s:s + _CHUNK]
-            d2, ind = brute_knn(self.Z_, self._sqn, z, k)
+            d2, ind = self._query(z, k)
             logE = -0.5 * d2 / self.bandwidth_ ** 2
             Qz = local_pca(self.Z_, z, ind, np.exp(logE), q)
             S = np.einsum("npa,nkpb->nkab", Qz, self.tangents_[ind])
@@ -332,14 +362,17 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         check_is_fitted(self, "embedding_")
         _, ind = self._ytree.query(self.embedding_, k=self.n_neighbors + 1)
         ind = ind[:, 1:]  # leave one out
-        dY = self.embedding_[:, None, :] - self.embedding_[ind]
         Zc = self.Z_[:, cols]
-        ell = Zc[ind] + np.einsum("nkpq,nkq->nkp", self.frames_[:, cols, :][ind], dY)
-        d2 = (dY ** 2).sum(axis=2)
-        errs = []
-        for f in factors:
-            w, _ = softmax_weights(-0.5 * d2 / (f * self.bandwidth_) ** 2)
-            errs.append(float(((np.einsum("nk,nkp->np", w, ell) - Zc) ** 2).sum(axis=1).mean()))
+        sse = np.zeros(len(factors))
+        for s in range(0, len(ind), _CHUNK):  # (chunk, k, p, q) frames: bounded memory
+            sl = slice(s, s + _CHUNK)
+            dY = self.embedding_[sl, None, :] - self.embedding_[ind[sl]]
+            ell = Zc[ind[sl]] + (self.frames_[:, cols, :][ind[sl]] @ dY[..., None])[..., 0]
+            d2 = (dY ** 2).sum(axis=2)
+            for i, f in enumerate(factors):
+                w, _ = softmax_weights(-0.5 * d2 / (f * self.bandwidth_) ** 2)
+                sse[i] += ((np.einsum("nk,nkp->np", w, ell) - Zc[sl]) ** 2).sum()
+        errs = list(sse / len(ind))
         self.recovery_bandwidth_ = factors[int(np.argmin(errs))] * self.bandwidth_
         return np.array(errs)
 

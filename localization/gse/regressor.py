@@ -34,9 +34,7 @@ from localization.gse.embedding import GrassmannStiefelEigenmaps
 from localization.gse.estimator_checks import regressor_expected_failed_checks
 from localization.gse.graph import (
     Array,
-    brute_knn,
     cuts_keep_connected,
-    knn_graph,
     local_pca,
     loop_coordinate,
 )
@@ -44,8 +42,10 @@ from localization.gse.io import load_regressor, save_regressor
 from localization.gse.jacobian_regression import (
     AGREEMENT_GRID,
     BANDWIDTH_GRID,
-    loo_bandwidth,
+    LooChunk,
+    loo_bandwidth_chunked,
 )
+from localization.gse.neighbors import ALGORITHMS, HNSWIndex, knn_graph_any, use_approximate
 from localization.gse.pose_block import PoseBlockMixin
 from localization.gse.queries import GSEQueryMixin
 from localization.gse.validation import validate_X, validate_y
@@ -130,6 +130,12 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         ``tau = agreement x`` the median y-distance to the jr_neighbors-th neighbour.
         Look-alike places among the feature-space neighbours then drop out. "auto":
         choose the factor (or none) with the bandwidth by leave-one-out.
+    algorithm : {"auto", "exact", "approximate"}, default="auto"
+        Neighbour search and solvers: "exact" (scikit-learn kNN, brute-force / KD-tree
+        queries, the eigensolvers of :class:`GrassmannStiefelEigenmaps`); "approximate",
+        the scalable path (faiss HNSW neighbours re-ranked by exact distance, AMG-
+        preconditioned LOBPCG and CG; docs/method.md §17); "auto": "approximate" from
+        :data:`~localization.gse.neighbors.APPROXIMATE_MIN_N` samples on.
 
     Attributes
     ----------
@@ -154,6 +160,8 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         Number of feature columns m.
     y_1d_ : bool
         Whether the poses were given as a 1-D array (:meth:`predict` then returns one too).
+    algorithm_ : str
+        The path that ran: "exact" or "approximate".
     """
 
     _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
@@ -175,6 +183,7 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         "loop_cut": [StrOptions({"auto", "none"})],
         "adaptive_bandwidth": ["boolean"],
         "agreement": [None, StrOptions({"auto"}), Interval(Real, 0, None, closed="neither")],
+        "algorithm": [StrOptions(set(ALGORITHMS))],
     }
 
     def __init__(self, n_components: int | None = None, n_neighbors: int = 20,
@@ -185,7 +194,8 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
                  out_of_domain: str = "raise", random_state: int = 0,
                  theta_scale_factor: float = 2.0, jr_neighbors: int | None = None,
                  kernel_grassmann: bool = False, loop_cut: str = "auto",
-                 adaptive_bandwidth: bool = False, agreement: float | str | None = None) -> None:
+                 adaptive_bandwidth: bool = False, agreement: float | str | None = None,
+                 algorithm: str = "auto") -> None:
         self.n_components = n_components
         self.n_neighbors = n_neighbors
         self.periodic = periodic
@@ -203,6 +213,7 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         self.loop_cut = loop_cut
         self.adaptive_bandwidth = adaptive_bandwidth
         self.agreement = agreement
+        self.algorithm = algorithm
 
     # --------------------------------------------------------------------- fit
     def __sklearn_tags__(self) -> Tags:
@@ -255,7 +266,8 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
             raise ValueError("W is constant: features carry no information")
         Ws = (W - self.w_mean_) / self.w_scale_
         self.theta_center_ = np.where(np.isin(np.arange(d), self._per), 0.0, Theta.mean(axis=0))
-        dist_w, ind_w = knn_graph(Ws, k)
+        self.algorithm_ = "approximate" if use_approximate(self.algorithm, n) else "exact"
+        dist_w, ind_w, self._ws_index = knn_graph_any(Ws, k, self.algorithm_ == "approximate")
         if isinstance(self.theta_scale, str):
             self.theta_scale_ = self.theta_scale_factor * self._auto_scale(Ws, Theta, ind_w)
         else:
@@ -278,7 +290,8 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         Z = np.column_stack([Ws, self._lift(Theta)])
         self.gse_ = GrassmannStiefelEigenmaps(
             q, n_neighbors=k, bandwidth=self.bandwidth, grassmann_kernel=self.grassmann_kernel,
-            out_of_domain=self.out_of_domain, random_state=self.random_state)
+            out_of_domain=self.out_of_domain, random_state=self.random_state,
+            algorithm=self.algorithm_)
         self.gse_.fit(Z, cut=self.cut_)
         self.gse_.select_recovery_bandwidth()
         H = self.gse_.frames_
@@ -304,7 +317,7 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         y = self.embedding_
         self.jr_neighbors_ = kj = min(self.jr_neighbors or k, n - 2)
         if kj != k:
-            d2, ind_w = brute_knn(Ws, self._ws_sqn, Ws, kj + 1)
+            d2, ind_w = self._query_w(Ws, kj + 1)
             ind_w, dist_w = ind_w[:, 1:], np.sqrt(d2[:, 1:])
         mask = self._mask(ind_w)
         grid = np.asarray(self.bandwidth_grid)
@@ -314,25 +327,34 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         taus = {"auto": (None, *AGREEMENT_GRID), None: (None,)}.get(self.agreement,  # type: ignore[call-overload]
                                                                     (self.agreement,))
         best = (np.inf, 0.0, None)
+        ad = self.adaptive_bandwidth
         for a in taus:
             tau = None if a is None else float(a) * y_radius
-            bw, mse = loo_bandwidth(
-                Ws[:, None, :] - Ws[ind_w], y[ind_w], self.Gr_[ind_w], y,
-                grid if self.adaptive_bandwidth else grid * np.median(dist_w[:, -1]), mask,
-                self._w_factor(Ws, ind_w), self.w_radius_[ind_w] if self.adaptive_bandwidth
-                else None, tau)
+
+            def chunk_w(sl: slice) -> LooChunk:
+                iw = ind_w[sl]
+                return (Ws[sl, None, :] - Ws[iw], y[iw], self.Gr_[iw], y[sl],
+                        None if mask is None else mask[sl], self._w_factor(Ws[sl], iw),
+                        self.w_radius_[iw] if ad else None)
+
+            bw, mse = loo_bandwidth_chunked(
+                n, chunk_w, grid if ad else grid * np.median(dist_w[:, -1]), tau)
             best = min(best, (float(mse.min()), bw, tau), key=lambda t: t[0])
         _, self.bandwidth_w_, self.agreement_ = best
         _, ind_t = self._zv_tree.query(self._zv, k=kj + 1)
         ind_t = ind_t[:, 1:]
-        dX = self._pose_diff(Theta, Theta[ind_t])
         mask = self._mask(ind_t)
-        self.theta_radius_ = np.linalg.norm(dX[:, -1], axis=1)
-        ad = self.adaptive_bandwidth
-        self.bandwidth_theta_, _ = loo_bandwidth(
-            dX, y[ind_t], self.GR_[ind_t], y,
-            grid if ad else grid * np.median(self.theta_radius_), mask, None,
-            self.theta_radius_[ind_t] if ad else None)
+        self.theta_radius_ = np.linalg.norm(self._pose_diff(Theta, Theta[ind_t[:, -1:]])[:, 0],
+                                            axis=1)
+
+        def chunk_t(sl: slice) -> LooChunk:
+            it = ind_t[sl]
+            return (self._pose_diff(Theta[sl], Theta[it]), y[it], self.GR_[it], y[sl],
+                    None if mask is None else mask[sl], None,
+                    self.theta_radius_[it] if ad else None)
+
+        self.bandwidth_theta_, _ = loo_bandwidth_chunked(
+            n, chunk_t, grid if ad else grid * np.median(self.theta_radius_))
 
     def _setup(self) -> None:
         """Derived per-sample query structures (after fit or load)."""
@@ -340,6 +362,8 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         self._ws = np.ascontiguousarray(self.gse_.Z_[:, :m])  # contiguous: fast GEMM queries
         self._ws_sqn = (self._ws ** 2).sum(axis=1)
         self._ws_tree = cKDTree(self._ws)
+        if self.gse_.algorithm_ == "approximate" and getattr(self, "_ws_index", None) is None:
+            self._ws_index = HNSWIndex(self._ws)
         self._zv = np.ascontiguousarray(self.gse_.Z_[:, m:])
         self._zv_tree = cKDTree(self._zv)  # pose space is low-dimensional
         self.embedding_ = self.gse_.embedding_
