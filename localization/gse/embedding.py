@@ -46,6 +46,7 @@ from localization.gse.graph import (
     softmax_weights,
     symmetric_edges,
 )
+from localization.gse.incremental import add_samples
 from localization.gse.jacobian_regression import jacobian_regression
 from localization.gse.neighbors import ALGORITHMS, HNSWIndex, knn_graph_any, use_approximate
 from localization.gse.solvers import laplacian_solve
@@ -253,8 +254,10 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         if n * q > max(dense_max, lu_max):
             H0 = landmark_frames(Z, Q, min(n // 2, 3000 // q), k, self.grassmann_kernel,
                                  self.random_state)
+        # the scalable path swaps only the large-n solver (LOBPCG) for the AMG-preconditioned
+        # one; the landmark frames are its start and its near-null space
         H, lam, cond = align_frames(Q, ei, ej, K, self.n_refine, self.random_state,
-                                    dense_max, S, H0, lu_max, amg=approx)
+                                    dense_max, S, H0, lu_max, amg=approx and H0 is not None)
         if lam[q] < 3.0 * lam[q - 1]:
             warnings.warn(f"weak alignment eigen-gap: lambda_(q+1)={lam[q]:.3g} < 3 x lambda_q="
                           f"{lam[q - 1]:.3g}; the frames may mix (disconnected or folded sample?)",
@@ -271,15 +274,53 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         """Per-sample query structures (also rebuilt after loading)."""
         self._sqn = (self.Z_ ** 2).sum(axis=1)
         self._ytree = cKDTree(self.embedding_)
-        if getattr(self, "algorithm_", "exact") == "approximate" and getattr(
-                self, "_index", None) is None:
-            self._index = HNSWIndex(self.Z_)
+        if getattr(self, "algorithm_", "exact") == "approximate":
+            if getattr(self, "_index", None) is None:
+                self._index = HNSWIndex(self.Z_)
+            elif self._index.index.ntotal < len(self.Z_):  # rows added by partial_fit
+                self._index.add(self.Z_)
 
     def _query(self, z: Array, k: int) -> tuple[Array, Array]:
         """k nearest samples of the rows of ``z`` (squared distances, indices)."""
         if getattr(self, "_index", None) is not None:
             return self._index.query(z, k)
         return brute_knn(self.Z_, self._sqn, z, k)
+
+    def partial_fit(self, Z: Array, y: None = None, cut: Array | None = None
+                    ) -> GrassmannStiefelEigenmaps:
+        """Add the samples ``Z`` (n_new, p) to the fitted embedding without a refit.
+
+        A local update (docs/method.md §18, :mod:`localization.gse.incremental`): the new
+        samples and the old ones whose k nearest neighbours change get new tangents,
+        frames (greedy alignment to the fixed frames around them, then ``n_refine``
+        sweeps) and coordinates (the embedding energy on their edges, every other
+        coordinate fixed). Bandwidths, and every other sample's tangent, frame and
+        coordinates, are kept. ``cut`` (n_new,) or (n_new, c) is required when the fit
+        had one. Sets ``partial_fit_rows_``: the rows that changed.
+        """
+        self._validate_params()
+        check_is_fitted(self, "embedding_", msg="This %(name)s instance is not fitted yet: "
+                        "call 'fit' before 'partial_fit' (partial_fit adds samples to a "
+                        "fitted embedding)")
+        Z = validate_X(self, Z, "Z", reset=False)
+        c = None
+        if (cut is None) != (self.cut_ is None):
+            raise ValueError("cut: give one exactly when the model was fitted with one (fit "
+                             f"had {'no cut' if self.cut_ is None else 'a cut'})")
+        if cut is not None:
+            c = np.asarray(cut, dtype=np.float64)
+            c = c[:, None] if c.ndim == 1 else c
+            if c.shape != (len(Z), self.cut_.shape[1]) or not np.isfinite(c).all():
+                raise ValueError(f"cut must be {len(Z)} finite angles per cut (shape "
+                                 f"({len(Z)}, {self.cut_.shape[1]})), got shape {np.shape(cut)}")
+        return self._add(Z, c, "Z")
+
+    def _add(self, Z: Array, cut: Array | None, name: str) -> GrassmannStiefelEigenmaps:
+        """:func:`~localization.gse.incremental.add_samples` of validated rows; errors
+        name the caller's argument ``name``."""
+        self.partial_fit_rows_ = add_samples(self, Z, cut, name)
+        self._setup()
+        return self
 
     def fit_transform(self, Z: Array, y: None = None, cut: Array | None = None) -> Array:
         """Fit and return ``embedding_`` (n, q)."""

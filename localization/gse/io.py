@@ -104,4 +104,6 @@ def load_regressor(cls: Any, path: str | Path) -> Any:
     model.gse_ = g
     model._setup()
     model._w_tangents = np.linalg.qr(g.frames_[:, :m, :])[0]
+    s = np.linalg.svd(g.frames_[:, m:, :], compute_uv=False)
+    model.pose_condition_ = s[:, 0] / np.maximum(s[:, -1], np.finfo(float).tiny)
     return model

@@ -38,6 +38,7 @@ from localization.gse.graph import (
     local_pca,
     loop_coordinate,
 )
+from localization.gse.incremental import add_regression_samples
 from localization.gse.io import load_regressor, save_regressor
 from localization.gse.jacobian_regression import (
     AGREEMENT_GRID,
@@ -310,6 +311,34 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         self._select_bandwidths(Ws, Theta, dist_w, ind_w)
         return self
 
+    def partial_fit(self, W: Array, y: Array) -> GSERegressor:
+        """Add samples to the fitted model without a refit (incremental GSE).
+
+        A local update (docs/method.md §18, :mod:`localization.gse.incremental`): the new
+        samples and the old ones whose neighbourhoods change get new tangents, frames,
+        coordinates and Jacobians ``G_r``, ``G_R``; everything else is kept, in particular
+        the standardisation of w, the pose scale, the cuts and the leave-one-out
+        bandwidths of the fit. Deterministic (the same data give the same model).
+
+        Parameters
+        ----------
+        W : array_like of shape (n_new, m)
+            Features of the new samples, with the m columns of the fit.
+        y : array_like of shape (n_new, d) or (n_new,)
+            Their poses Theta, in the layout of the fit (``y`` as in :meth:`fit` and
+            scikit-learn's ``partial_fit``).
+
+        Returns
+        -------
+        self
+            With ``partial_fit_rows_``: the rows whose model changed.
+        """
+        self._validate_params()
+        check_is_fitted(self, "gse_", msg="This %(name)s instance is not fitted yet: call "
+                        "'fit' before 'partial_fit' (partial_fit adds samples to a fitted "
+                        "model)")
+        return add_regression_samples(self, W, y)
+
     def _select_bandwidths(self, Ws: Array, Theta: Array, dist_w: Array, ind_w: Array) -> None:
         """Leave-one-out bandwidths (and agreement scale) of the two Jacobian regressions
         r* (features) and R* (poses)."""
@@ -362,8 +391,11 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         self._ws = np.ascontiguousarray(self.gse_.Z_[:, :m])  # contiguous: fast GEMM queries
         self._ws_sqn = (self._ws ** 2).sum(axis=1)
         self._ws_tree = cKDTree(self._ws)
-        if self.gse_.algorithm_ == "approximate" and getattr(self, "_ws_index", None) is None:
-            self._ws_index = HNSWIndex(self._ws)
+        if self.gse_.algorithm_ == "approximate":
+            if getattr(self, "_ws_index", None) is None:
+                self._ws_index = HNSWIndex(self._ws)
+            elif self._ws_index.index.ntotal < len(self._ws):  # rows added by partial_fit
+                self._ws_index.add(self._ws)
         self._zv = np.ascontiguousarray(self.gse_.Z_[:, m:])
         self._zv_tree = cKDTree(self._zv)  # pose space is low-dimensional
         self.embedding_ = self.gse_.embedding_
