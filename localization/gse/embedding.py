@@ -15,8 +15,6 @@ from numbers import Integral, Real
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy import sparse
-from scipy.sparse.linalg import cg
 from scipy.spatial import cKDTree
 from sklearn.base import (
     BaseEstimator,
@@ -46,42 +44,13 @@ from localization.gse.graph import (
     softmax_weights,
     symmetric_edges,
 )
-from localization.gse.incremental import add_samples
+from localization.gse.incremental import add_samples, check_cut
 from localization.gse.jacobian_regression import jacobian_regression
 from localization.gse.neighbors import ALGORITHMS, HNSWIndex, knn_graph_any, use_approximate
-from localization.gse.solvers import laplacian_solve
+from localization.gse.solvers import embed_from_frames
 from localization.gse.validation import check_2d, validate_X
 
 __all__ = ["GrassmannStiefelEigenmaps", "align_frames", "embed_from_frames", "grassmann_kernel"]
-
-def embed_from_frames(Z: Array, H: Array, ei: Array, ej: Array, K: Array,
-                      amg: bool = False) -> Array:
-    """Solve ``L Y = B`` (docs/method.md §6) for zero-mean coordinates Y (n, q).
-
-    ``B_i = 1/2 sum_j K_ij (H_i + H_j)^T (Z_i - Z_j)``, computed with sparse
-    products only; CG with a Jacobi preconditioner from zero (consistent
-    singular system on a connected graph), or with ``amg=True`` (the scalable path)
-    AMG-preconditioned CG (:func:`~localization.gse.solvers.laplacian_solve`).
-    """
-    n, p, q = H.shape
-    Ks = sparse.coo_matrix((K, (ei, ej)), shape=(n, n))
-    Ks = (Ks + Ks.T).tocsr()
-    deg = np.asarray(Ks.sum(axis=1)).ravel()
-    KZ = Ks @ Z
-    KH = (Ks @ H.reshape(n, p * q)).reshape(n, p, q)
-    HZ = np.einsum("npq,np->nq", H, Z)
-    B = 0.5 * (np.einsum("npq,np->nq", H, deg[:, None] * Z - KZ)
-               + np.einsum("npq,np->nq", KH, Z) - Ks @ HZ)
-    B -= B.mean(axis=0)
-    L = (sparse.diags(deg) - Ks).tocsr()
-    if amg:
-        return laplacian_solve(L, B)
-    P = sparse.diags(1.0 / deg)
-    Y = np.zeros((n, q))
-    for c in range(q):
-        Y[:, c], _ = cg(L, B[:, c], rtol=1e-11, atol=0.0, maxiter=20 * n, M=P)
-    return Y - Y.mean(axis=0)
-
 
 class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixin,
                                 BaseEstimator):
@@ -226,14 +195,7 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         if not sigma > 0:
             raise ValueError(f"bandwidth must be positive, got {sigma}")
         Q = local_pca(Z, Z, ind, np.exp(-0.5 * (dist / sigma) ** 2), q)
-        self.cut_ = None
-        if cut is not None:
-            c = np.asarray(cut, dtype=np.float64)
-            c = c[:, None] if c.ndim == 1 else c
-            if c.ndim != 2 or c.shape[0] != n or not np.isfinite(c).all():
-                raise ValueError(f"cut must be {n} finite angles per cut (shape ({n},) or "
-                                 f"({n}, c)), got shape {np.shape(cut)}")
-            self.cut_ = c
+        self.cut_ = None if cut is None else check_cut(cut, n)
         allowed = None if cut is None else same_side(
             np.concatenate([self.cut_[:, None, :], self.cut_[ind]], axis=1))[:, 1:]
         ei, ej = symmetric_edges(ind, allowed)
@@ -303,16 +265,10 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
                         "call 'fit' before 'partial_fit' (partial_fit adds samples to a "
                         "fitted embedding)")
         Z = validate_X(self, Z, "Z", reset=False)
-        c = None
         if (cut is None) != (self.cut_ is None):
             raise ValueError("cut: give one exactly when the model was fitted with one (fit "
                              f"had {'no cut' if self.cut_ is None else 'a cut'})")
-        if cut is not None:
-            c = np.asarray(cut, dtype=np.float64)
-            c = c[:, None] if c.ndim == 1 else c
-            if c.shape != (len(Z), self.cut_.shape[1]) or not np.isfinite(c).all():
-                raise ValueError(f"cut must be {len(Z)} finite angles per cut (shape "
-                                 f"({len(Z)}, {self.cut_.shape[1]})), got shape {np.shape(cut)}")
+        c = None if cut is None else check_cut(cut, len(Z), self.cut_.shape[1])
         return self._add(Z, c, "Z")
 
     def _add(self, Z: Array, cut: Array | None, name: str) -> GrassmannStiefelEigenmaps:

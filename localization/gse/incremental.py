@@ -32,9 +32,22 @@ from scipy import sparse
 from scipy.sparse.linalg import splu
 
 from localization.gse.alignment import grassmann_kernel
-from localization.gse.graph import Array, brute_knn, local_pca, polar, same_side
+from localization.gse.graph import Array, brute_knn, local_pca, pinv_blocks, polar, same_side
 
-__all__ = ["add_samples"]
+__all__ = ["add_regression_samples", "add_samples", "check_cut"]
+
+
+def check_cut(cut: Array, n: int, n_cuts: int | None = None) -> Array:
+    """Cut coordinates as finite angles of shape (n, c) (from (n,) or (n, c)); ValueError
+    naming ``cut`` otherwise (``n_cuts``: the c of the fit, for partial_fit)."""
+    c = np.asarray(cut, dtype=np.float64)
+    c = c[:, None] if c.ndim == 1 else c
+    want = f"({n}, {n_cuts})" if n_cuts else f"({n},) or ({n}, c)"
+    if (c.ndim != 2 or c.shape[0] != n or (n_cuts and c.shape[1] != n_cuts)
+            or not np.isfinite(c).all()):
+        raise ValueError(f"cut must be {n} finite angles per cut (shape {want}), got shape "
+                         f"{np.shape(cut)}")
+    return c
 
 
 def _check_duplicates(d2: Array, scale: float, name: str) -> None:
@@ -216,7 +229,6 @@ def add_regression_samples(model: Any, W_new: Array, Theta_new: Array) -> Any:
     on the rows that changed."""
     from localization.geometry import wrap_angle
     from localization.gse.graph import brute_knn as knn
-    from localization.gse.regressor import pinv_blocks
     from localization.gse.validation import validate_X, validate_y
 
     W = validate_X(model, W_new, "W", reset=False)

@@ -16,7 +16,6 @@ nearest neighbour's side of every cut.
 
 from __future__ import annotations
 
-import warnings
 from numbers import Integral, Real
 from pathlib import Path
 from typing import Any, ClassVar
@@ -37,6 +36,7 @@ from localization.gse.graph import (
     cuts_keep_connected,
     local_pca,
     loop_coordinate,
+    pinv_blocks,
 )
 from localization.gse.incremental import add_regression_samples
 from localization.gse.io import load_regressor, save_regressor
@@ -60,19 +60,6 @@ def _broadcast_scale(theta_scale: object, d: int) -> Array:
         raise ValueError(f"theta_scale must be 'auto', a number or {d} numbers (one per pose "
                          f"column), got shape {scale.shape}")
     return np.broadcast_to(scale.ravel() if scale.ndim else scale, (d,)).copy()
-
-
-def pinv_blocks(H: Array, ridge: float = 0.0) -> Array:
-    """``(H^T H + ridge I)^{-1} H^T`` for a batch (n, a, b) -> (n, b, a), by q x q solves."""
-    HtH = np.swapaxes(H, 1, 2) @ H + ridge * np.eye(H.shape[2])
-    try:
-        return np.linalg.solve(HtH, np.swapaxes(H, 1, 2))
-    except np.linalg.LinAlgError:  # an exactly rank-deficient block (only with ridge=0)
-        warnings.warn("a block of the GSE frames is rank-deficient (the poses or features do "
-                      "not vary along the fitted manifold at some samples); using the "
-                      "minimum-norm pseudo-inverse there: pass ridge > 0 to regularise",
-                      RuntimeWarning, stacklevel=3)
-        return np.linalg.pinv(H)
 
 
 class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator):

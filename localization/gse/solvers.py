@@ -27,7 +27,7 @@ from scipy.sparse.linalg import cg, lobpcg
 
 from localization.geometry import Array
 
-__all__ = ["block_matrix", "connection_eigs", "laplacian_solve"]
+__all__ = ["block_matrix", "connection_eigs", "embed_from_frames", "laplacian_solve"]
 
 _ROUND = 8  # LOBPCG iterations between convergence checks of the wanted pairs
 
@@ -144,3 +144,32 @@ def connection_eigs(A: sparse.bsr_matrix, d: Array, nev: int, X0: Array, seed: i
         warnings.warn(f"alignment eigensolver (AMG-LOBPCG) residual {res[:-1].max():.2g} > "
                       f"1e-4 after {maxiter} iterations", RuntimeWarning, stacklevel=3)
     return lam, X
+
+
+def embed_from_frames(Z: Array, H: Array, ei: Array, ej: Array, K: Array,
+                      amg: bool = False) -> Array:
+    """Solve ``L Y = B`` (docs/method.md §6) for zero-mean coordinates Y (n, q).
+
+    ``B_i = 1/2 sum_j K_ij (H_i + H_j)^T (Z_i - Z_j)``, computed with sparse
+    products only; CG with a Jacobi preconditioner from zero (consistent
+    singular system on a connected graph), or with ``amg=True`` (the scalable path)
+    AMG-preconditioned CG (:func:`~localization.gse.solvers.laplacian_solve`).
+    """
+    n, p, q = H.shape
+    Ks = sparse.coo_matrix((K, (ei, ej)), shape=(n, n))
+    Ks = (Ks + Ks.T).tocsr()
+    deg = np.asarray(Ks.sum(axis=1)).ravel()
+    KZ = Ks @ Z
+    KH = (Ks @ H.reshape(n, p * q)).reshape(n, p, q)
+    HZ = np.einsum("npq,np->nq", H, Z)
+    B = 0.5 * (np.einsum("npq,np->nq", H, deg[:, None] * Z - KZ)
+               + np.einsum("npq,np->nq", KH, Z) - Ks @ HZ)
+    B -= B.mean(axis=0)
+    L = (sparse.diags(deg) - Ks).tocsr()
+    if amg:
+        return laplacian_solve(L, B)
+    P = sparse.diags(1.0 / deg)
+    Y = np.zeros((n, q))
+    for c in range(q):
+        Y[:, c], _ = cg(L, B[:, c], rtol=1e-11, atol=0.0, maxiter=20 * n, M=P)
+    return Y - Y.mean(axis=0)
