@@ -209,6 +209,34 @@ class AppearanceLocalizer(NoiseModelMixin, MapMixin):
         self.control_gain_ = np.ones(2)
         return self
 
+    def partial_fit(self, images: ArrayLike, poses: ArrayLike) -> AppearanceLocalizer:
+        """Add images of new places to the fitted localizer without a refit.
+
+        The images go through the fitted feature extractor and
+        :meth:`GSERegressor.partial_fit <localization.gse.regressor.GSERegressor.partial_fit>`
+        adds them to the GSE regression by a local update (docs/method.md §18): a robot
+        maps a new street, and ``predict`` covers it at once. Kept as fitted: the
+        features, the heading cut ``yaw_cut_``, the measurement noise and its calibration
+        (call :meth:`fit_noise` to re-estimate them on data of the new places),
+        ``fingerprint_``, ``city_`` and ``camera_``.
+
+        Parameters
+        ----------
+        images : ndarray of shape (n, H, W, 3), uint8
+            The fitted image size.
+        poses : ndarray of shape (n, 3)
+            True poses [x, y, yaw] where the images were taken.
+
+        Returns
+        -------
+        self
+        """
+        self._check_fitted()
+        images, poses = check_data(images, poses)
+        W = self.transform(images)
+        self.regressor_.partial_fit(W, self._to_model(poses))
+        return self
+
     def _check_params(self) -> None:
         """Validate the constructor's hyperparameters (scikit-learn style: at fit time)."""
         if not isinstance(self.features, str):

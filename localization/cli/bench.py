@@ -89,8 +89,10 @@ def _check_env_bench(c: EnvBenchConfig) -> None:
 def _check_gse_bench(c: GSEBenchConfig) -> None:
     check_int_list("gse_ns", c.ns, minimum=2)
     check_int_list("gse_accuracy_dims", c.accuracy_dims, minimum=1)
+    check_int_list("gse_scale_ns", c.scale_ns, minimum=100)
     check_numbers(c, positive=("m", "n_neighbors", "batch_size", "latency_repeats", "latency_n",
-                               "accuracy_n_train", "accuracy_n_test", "timeout"),
+                               "accuracy_n_train", "accuracy_n_test", "timeout", "compare_n",
+                               "incremental_n", "incremental_new"),
                   non_negative=("seed", "map_seed", "threads"), prefix="gse_")
     if c.out:
         check_output_file("gse_out", str(Path(c.out).with_suffix(".json")))

@@ -15,8 +15,6 @@ from numbers import Integral, Real
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy import sparse
-from scipy.sparse.linalg import cg
 from scipy.spatial import cKDTree
 from sklearn.base import (
     BaseEstimator,
@@ -40,42 +38,19 @@ from localization.gse.graph import (
     Array,
     brute_knn,
     check_connected,
-    knn_graph,
     local_pca,
     polar,
     same_side,
     softmax_weights,
     symmetric_edges,
 )
+from localization.gse.incremental import add_samples, check_cut
 from localization.gse.jacobian_regression import jacobian_regression
+from localization.gse.neighbors import ALGORITHMS, HNSWIndex, knn_graph_any, use_approximate
+from localization.gse.solvers import embed_from_frames
 from localization.gse.validation import check_2d, validate_X
 
 __all__ = ["GrassmannStiefelEigenmaps", "align_frames", "embed_from_frames", "grassmann_kernel"]
-
-def embed_from_frames(Z: Array, H: Array, ei: Array, ej: Array, K: Array) -> Array:
-    """Solve ``L Y = B`` (docs/method.md §6) for zero-mean coordinates Y (n, q).
-
-    ``B_i = 1/2 sum_j K_ij (H_i + H_j)^T (Z_i - Z_j)``, computed with sparse
-    products only; CG with a Jacobi preconditioner from zero (consistent
-    singular system on a connected graph).
-    """
-    n, p, q = H.shape
-    Ks = sparse.coo_matrix((K, (ei, ej)), shape=(n, n))
-    Ks = (Ks + Ks.T).tocsr()
-    deg = np.asarray(Ks.sum(axis=1)).ravel()
-    KZ = Ks @ Z
-    KH = (Ks @ H.reshape(n, p * q)).reshape(n, p, q)
-    HZ = np.einsum("npq,np->nq", H, Z)
-    B = 0.5 * (np.einsum("npq,np->nq", H, deg[:, None] * Z - KZ)
-               + np.einsum("npq,np->nq", KH, Z) - Ks @ HZ)
-    B -= B.mean(axis=0)
-    L = (sparse.diags(deg) - Ks).tocsr()
-    P = sparse.diags(1.0 / deg)
-    Y = np.zeros((n, q))
-    for c in range(q):
-        Y[:, c], _ = cg(L, B[:, c], rtol=1e-11, atol=0.0, maxiter=20 * n, M=P)
-    return Y - Y.mean(axis=0)
-
 
 class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixin,
                                 BaseEstimator):
@@ -105,6 +80,12 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         the (normalised, nearest-neighbour dominated) estimate anyway.
     random_state : int, default=0
         Seed of the eigensolver start block.
+    algorithm : {"auto", "exact", "approximate"}, default="auto"
+        "exact": exact kNN graph and the eigensolvers above. "approximate" (the scalable
+        path, docs/method.md §17): faiss HNSW neighbours (exact distances re-ranked),
+        AMG-preconditioned LOBPCG for the alignment and AMG-preconditioned CG for the
+        embedding. "auto": "approximate" from
+        :data:`~localization.gse.neighbors.APPROXIMATE_MIN_N` samples on.
 
     Attributes
     ----------
@@ -124,6 +105,10 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         :meth:`select_recovery_bandwidth`).
     n_features_in_ : int
         Number of columns p of the sample.
+    algorithm_ : str
+        The path that ran: "exact" or "approximate".
+    neighbors_, neighbor_distances_ : ndarray of shape (n, k)
+        The kNN lists (ascending) the graph was built from (kept for :meth:`partial_fit`).
     """
 
     _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
@@ -137,13 +122,15 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         "min_kernel_sum": [Interval(Real, 0, None, closed="neither")],
         "out_of_domain": [StrOptions({"raise", "nan", "ignore"})],
         "random_state": [Interval(Integral, 0, None, closed="left")],
+        "algorithm": [StrOptions(set(ALGORITHMS))],
     }
 
     def __init__(self, n_components: int = 2, n_neighbors: int = 15,
                  bandwidth: float | str = "auto", grassmann_kernel: str = "binet_cauchy",
                  grassmann_threshold: float | None = None, n_refine: int = 5,
                  eigen_solver: str = "auto", min_kernel_sum: float = 1e-8,
-                 out_of_domain: str = "raise", random_state: int = 0) -> None:
+                 out_of_domain: str = "raise", random_state: int = 0,
+                 algorithm: str = "auto") -> None:
         self.n_components = n_components
         self.n_neighbors = n_neighbors
         self.bandwidth = bandwidth
@@ -154,6 +141,7 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         self.min_kernel_sum = min_kernel_sum
         self.out_of_domain = out_of_domain
         self.random_state = random_state
+        self.algorithm = algorithm
 
     def _check_params(self, n: int, p: int) -> None:
         """Checks that depend on the sample (the types and ranges are in
@@ -198,20 +186,16 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         n, p = Z.shape
         self._check_params(n, p)
         q, k = self.n_components, self.n_neighbors
-        dist, ind = knn_graph(Z, k)
+        approx = use_approximate(self.algorithm, n)
+        self.algorithm_ = "approximate" if approx else "exact"
+        dist, ind, self._index = knn_graph_any(Z, k, approx)
+        self.neighbors_, self.neighbor_distances_ = ind, dist
         sigma = (0.5 * float(np.median(dist[:, -1])) if self.bandwidth == "auto"
                  else float(self.bandwidth))
         if not sigma > 0:
             raise ValueError(f"bandwidth must be positive, got {sigma}")
         Q = local_pca(Z, Z, ind, np.exp(-0.5 * (dist / sigma) ** 2), q)
-        self.cut_ = None
-        if cut is not None:
-            c = np.asarray(cut, dtype=np.float64)
-            c = c[:, None] if c.ndim == 1 else c
-            if c.ndim != 2 or c.shape[0] != n or not np.isfinite(c).all():
-                raise ValueError(f"cut must be {n} finite angles per cut (shape ({n},) or "
-                                 f"({n}, c)), got shape {np.shape(cut)}")
-            self.cut_ = c
+        self.cut_ = None if cut is None else check_cut(cut, n)
         allowed = None if cut is None else same_side(
             np.concatenate([self.cut_[:, None, :], self.cut_[ind]], axis=1))[:, 1:]
         ei, ej = symmetric_edges(ind, allowed)
@@ -232,13 +216,15 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         if n * q > max(dense_max, lu_max):
             H0 = landmark_frames(Z, Q, min(n // 2, 3000 // q), k, self.grassmann_kernel,
                                  self.random_state)
+        # the scalable path swaps only the large-n solver (LOBPCG) for the AMG-preconditioned
+        # one; the landmark frames are its start and its near-null space
         H, lam, cond = align_frames(Q, ei, ej, K, self.n_refine, self.random_state,
-                                    dense_max, S, H0, lu_max)
+                                    dense_max, S, H0, lu_max, amg=approx and H0 is not None)
         if lam[q] < 3.0 * lam[q - 1]:
             warnings.warn(f"weak alignment eigen-gap: lambda_(q+1)={lam[q]:.3g} < 3 x lambda_q="
                           f"{lam[q - 1]:.3g}; the frames may mix (disconnected or folded sample?)",
                           RuntimeWarning, stacklevel=2)
-        self.embedding_ = embed_from_frames(Z, H, ei, ej, K)
+        self.embedding_ = embed_from_frames(Z, H, ei, ej, K, amg=approx)
         self.Z_, self.tangents_, self.frames_ = Z, Q, H
         self.alignment_eigenvalues_, self.frame_condition_ = lam, cond
         self.bandwidth_, self.n_edges_ = sigma, len(ei)
@@ -250,6 +236,47 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         """Per-sample query structures (also rebuilt after loading)."""
         self._sqn = (self.Z_ ** 2).sum(axis=1)
         self._ytree = cKDTree(self.embedding_)
+        if getattr(self, "algorithm_", "exact") == "approximate":
+            if getattr(self, "_index", None) is None:
+                self._index = HNSWIndex(self.Z_)
+            elif self._index.index.ntotal < len(self.Z_):  # rows added by partial_fit
+                self._index.add(self.Z_)
+
+    def _query(self, z: Array, k: int) -> tuple[Array, Array]:
+        """k nearest samples of the rows of ``z`` (squared distances, indices)."""
+        if getattr(self, "_index", None) is not None:
+            return self._index.query(z, k)
+        return brute_knn(self.Z_, self._sqn, z, k)
+
+    def partial_fit(self, Z: Array, y: None = None, cut: Array | None = None
+                    ) -> GrassmannStiefelEigenmaps:
+        """Add the samples ``Z`` (n_new, p) to the fitted embedding without a refit.
+
+        A local update (docs/method.md §18, :mod:`localization.gse.incremental`): the new
+        samples and the old ones whose k nearest neighbours change get new tangents,
+        frames (greedy alignment to the fixed frames around them, then ``n_refine``
+        sweeps) and coordinates (the embedding energy on their edges, every other
+        coordinate fixed). Bandwidths, and every other sample's tangent, frame and
+        coordinates, are kept. ``cut`` (n_new,) or (n_new, c) is required when the fit
+        had one. Sets ``partial_fit_rows_``: the rows that changed.
+        """
+        self._validate_params()
+        check_is_fitted(self, "embedding_", msg="This %(name)s instance is not fitted yet: "
+                        "call 'fit' before 'partial_fit' (partial_fit adds samples to a "
+                        "fitted embedding)")
+        Z = validate_X(self, Z, "Z", reset=False)
+        if (cut is None) != (self.cut_ is None):
+            raise ValueError("cut: give one exactly when the model was fitted with one (fit "
+                             f"had {'no cut' if self.cut_ is None else 'a cut'})")
+        c = None if cut is None else check_cut(cut, len(Z), self.cut_.shape[1])
+        return self._add(Z, c, "Z")
+
+    def _add(self, Z: Array, cut: Array | None, name: str) -> GrassmannStiefelEigenmaps:
+        """:func:`~localization.gse.incremental.add_samples` of validated rows; errors
+        name the caller's argument ``name``."""
+        self.partial_fit_rows_ = add_samples(self, Z, cut, name)
+        self._setup()
+        return self
 
     def fit_transform(self, Z: Array, y: None = None, cut: Array | None = None) -> Array:
         """Fit and return ``embedding_`` (n, q)."""
@@ -273,7 +300,7 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         out = np.empty((Z.shape[0], q))
         for s in range(0, Z.shape[0], _CHUNK):
             z = Z[s:s + _CHUNK]
-            d2, ind = brute_knn(self.Z_, self._sqn, z, k)
+            d2, ind = self._query(z, k)
             logE = -0.5 * d2 / self.bandwidth_ ** 2
             Qz = local_pca(self.Z_, z, ind, np.exp(logE), q)
             S = np.einsum("npa,nkpb->nkab", Qz, self.tangents_[ind])
@@ -332,14 +359,17 @@ class GrassmannStiefelEigenmaps(ClassNamePrefixFeaturesOutMixin, TransformerMixi
         check_is_fitted(self, "embedding_")
         _, ind = self._ytree.query(self.embedding_, k=self.n_neighbors + 1)
         ind = ind[:, 1:]  # leave one out
-        dY = self.embedding_[:, None, :] - self.embedding_[ind]
         Zc = self.Z_[:, cols]
-        ell = Zc[ind] + np.einsum("nkpq,nkq->nkp", self.frames_[:, cols, :][ind], dY)
-        d2 = (dY ** 2).sum(axis=2)
-        errs = []
-        for f in factors:
-            w, _ = softmax_weights(-0.5 * d2 / (f * self.bandwidth_) ** 2)
-            errs.append(float(((np.einsum("nk,nkp->np", w, ell) - Zc) ** 2).sum(axis=1).mean()))
+        sse = np.zeros(len(factors))
+        for s in range(0, len(ind), _CHUNK):  # (chunk, k, p, q) frames: bounded memory
+            sl = slice(s, s + _CHUNK)
+            dY = self.embedding_[sl, None, :] - self.embedding_[ind[sl]]
+            ell = Zc[ind[sl]] + (self.frames_[:, cols, :][ind[sl]] @ dY[..., None])[..., 0]
+            d2 = (dY ** 2).sum(axis=2)
+            for i, f in enumerate(factors):
+                w, _ = softmax_weights(-0.5 * d2 / (f * self.bandwidth_) ** 2)
+                sse[i] += ((np.einsum("nk,nkp->np", w, ell) - Zc[sl]) ** 2).sum()
+        errs = list(sse / len(ind))
         self.recovery_bandwidth_ = factors[int(np.argmin(errs))] * self.bandwidth_
         return np.array(errs)
 

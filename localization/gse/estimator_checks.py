@@ -23,10 +23,22 @@ _BLOB_CHECKS = ("check_pipeline_consistency", "check_estimators_pickle",
                 "check_transformer_preserve_dtypes")
 
 
+#: partial_fit adds samples to a fitted model (docs/method.md §18); these checks call it on
+#: an unfitted estimator, or pass it the samples of the fit again.
+_PARTIAL_FIT = {
+    "check_n_features_in_after_fitting": (
+        "the check calls partial_fit on an unfitted estimator: incremental GSE updates a "
+        "fitted embedding locally and needs fit first (it raises NotFittedError)"),
+    "check_fit_score_takes_y": (
+        "the check passes the samples of fit to partial_fit again: GSE rejects duplicate "
+        "samples (a zero-distance neighbour leaves the local tangent undefined)"),
+}
+
+
 def embedding_expected_failed_checks(model: Any) -> dict[str, str]:
     """The scikit-learn estimator checks ``model`` cannot pass, each with its reason."""
     k, q = model.n_neighbors, model.n_components
-    out = {"check_positive_only_tag_during_fit": _IRIS}
+    out = {"check_positive_only_tag_during_fit": _IRIS, **_PARTIAL_FIT}
     if k < 15:
         out |= dict.fromkeys(_BLOB_CHECKS, (
             f"the check's data are two separated blobs of 15 samples: with n_neighbors={k} "
@@ -62,7 +74,9 @@ _REGRESSOR_SIZES = {"check_estimators_nan_inf": 10, "check_fit2d_1feature": 10,
 def regressor_expected_failed_checks(model: Any) -> dict[str, str]:
     """The scikit-learn estimator checks ``model`` cannot pass, each with its reason."""
     k = model.n_neighbors
-    out = {"check_positive_only_tag_during_fit": _IRIS}
+    out = {"check_positive_only_tag_during_fit": _IRIS, **_PARTIAL_FIT,
+           "check_estimators_partial_fit_n_features": _PARTIAL_FIT[
+               "check_n_features_in_after_fitting"]}
     if k < 15:
         out |= dict.fromkeys(("check_pipeline_consistency", "check_estimators_pickle"), (
             "the check's data are two separated blobs of 15 samples with a constant target "

@@ -267,3 +267,16 @@ def smallest_generalized_eigs(M: sparse.spmatrix, d: Array, nev: int, seed: int 
         warnings.warn(f"alignment eigensolver (LOBPCG) residual {res.max():.2g} > 1e-4 after "
                       f"{maxiter} iterations", RuntimeWarning, stacklevel=3)
     return 1.0 - mu, X * isq[:, None]
+
+
+def pinv_blocks(H: Array, ridge: float = 0.0) -> Array:
+    """``(H^T H + ridge I)^{-1} H^T`` for a batch (n, a, b) -> (n, b, a), by q x q solves."""
+    HtH = np.swapaxes(H, 1, 2) @ H + ridge * np.eye(H.shape[2])
+    try:
+        return np.linalg.solve(HtH, np.swapaxes(H, 1, 2))
+    except np.linalg.LinAlgError:  # an exactly rank-deficient block (only with ridge=0)
+        warnings.warn("a block of the GSE frames is rank-deficient (the poses or features do "
+                      "not vary along the fitted manifold at some samples); using the "
+                      "minimum-norm pseudo-inverse there: pass ridge > 0 to regularise",
+                      RuntimeWarning, stacklevel=3)
+        return np.linalg.pinv(H)

@@ -25,13 +25,15 @@ def save_regressor(model: Any, path: str | Path) -> None:
         "jr_neighbors_": model.jr_neighbors_, "pca_bw": model._pca_bw,
         "gse_bandwidth_": g.bandwidth_, "recovery_bandwidth_": g.recovery_bandwidth_,
         "n_edges_": g.n_edges_, "agreement_": model.agreement_,
-        "y_1d": bool(getattr(model, "y_1d_", False)), "format": 2}
+        "y_1d": bool(getattr(model, "y_1d_", False)), "algorithm_": g.algorithm_, "format": 3}
     if isinstance(settings["params"]["theta_scale"], np.ndarray):
         settings["params"]["theta_scale"] = settings["params"]["theta_scale"].tolist()
     arrays = {k: getattr(model, k) if hasattr(model, k) else getattr(g, k) for k in _ARRAYS}
     arrays["cut_"] = np.zeros(0) if g.cut_ is None else g.cut_
     arrays["loop_angle_"] = np.zeros(0) if model.loop_angle_ is None else model.loop_angle_
     arrays["w_radius_"], arrays["theta_radius_"] = model.w_radius_, model.theta_radius_
+    arrays["neighbors_"] = g.neighbors_  # the kNN lists partial_fit updates (format 3)
+    arrays["neighbor_distances_"] = g.neighbor_distances_
     np.savez(path, settings=np.array(json.dumps(settings)), **arrays)
 
 
@@ -65,6 +67,15 @@ def load_regressor(cls: Any, path: str | Path) -> Any:
         g.bandwidth_, g.n_edges_ = float(s["gse_bandwidth_"]), int(s["n_edges_"])
         g.recovery_bandwidth_ = float(s["recovery_bandwidth_"])
         g.n_components_graph_ = 1
+        g.algorithm_ = model.algorithm_ = str(s.get("algorithm_", "exact"))  # format < 3: exact
+        if "neighbors_" in data:
+            g.neighbors_ = np.asarray(data["neighbors_"], dtype=np.intp)
+            g.neighbor_distances_ = np.asarray(data["neighbor_distances_"], dtype=np.float64)
+            if (g.neighbors_.shape != g.neighbor_distances_.shape
+                    or g.neighbors_.shape[0] != len(data["theta_"])
+                    or g.neighbors_.size and not 0 <= g.neighbors_.min() <= g.neighbors_.max()
+                    < len(data["theta_"])):
+                raise ValueError("neighbors_ has the wrong shape or indices")
         model.w_scale_ = float(s["w_scale_"])
         model.y_1d_ = bool(s.get("y_1d", False))  # absent from older files: 2-D poses
         model.agreement_ = s.get("agreement_")
@@ -93,4 +104,6 @@ def load_regressor(cls: Any, path: str | Path) -> Any:
     model.gse_ = g
     model._setup()
     model._w_tangents = np.linalg.qr(g.frames_[:, :m, :])[0]
+    s = np.linalg.svd(g.frames_[:, m:, :], compute_uv=False)
+    model.pose_condition_ = s[:, 0] / np.maximum(s[:, -1], np.finfo(float).tiny)
     return model

@@ -16,6 +16,9 @@ exact ``G_i``) for any kernel.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 from sklearn.base import BaseEstimator
@@ -133,6 +136,28 @@ def loo_bandwidth(dX: Array, Y_nb: Array, G_nb: Array, Y: Array, grid: Array,
     mse = np.array([((gaussian_jr(dX, Y_nb, G_nb, s if radius is None else s * radius, mask,
                                   log_factor=log_factor, agreement=agreement)[0] - Y) ** 2
                       ).sum(axis=1).mean() for s in grid])
+    return float(grid[int(np.argmin(mse))]), mse
+
+
+#: A chunk of leave-one-out neighbourhoods: dX, Y_nb, G_nb, Y, mask, log_factor, radius
+#: (the arguments of :func:`loo_bandwidth`, for rows ``sl``).
+LooChunk = tuple[Array, Array, Array, Array, Any, Any, Any]
+
+
+def loo_bandwidth_chunked(n: int, chunk: Callable[[slice], LooChunk], grid: Array,
+                          agreement: float | None = None, size: int = 2048
+                          ) -> tuple[float, Array]:
+    """:func:`loo_bandwidth` over rows gathered ``size`` at a time by ``chunk(rows)``:
+    the neighbourhood arrays (n, k, dy, dx) of all n samples would take gigabytes at
+    n = 100k. Same result as one call on all rows (the MSE is a sum over rows)."""
+    sse = np.zeros(len(grid))
+    for s in range(0, n, size):
+        dX, Y_nb, G_nb, Y, mask, log_factor, radius = chunk(slice(s, min(s + size, n)))
+        for i, bw in enumerate(grid):
+            f = gaussian_jr(dX, Y_nb, G_nb, bw if radius is None else bw * radius, mask,
+                            log_factor=log_factor, agreement=agreement)[0]
+            sse[i] += ((f - Y) ** 2).sum()
+    mse = sse / n
     return float(grid[int(np.argmin(mse))]), mse
 
 

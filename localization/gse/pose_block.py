@@ -91,17 +91,22 @@ class PoseBlockMixin:
         d = Theta.shape[1]
         self.theta_scale_ = np.ones(d)
         dT = self._pose_diff(Theta, Theta[ind_w])
-        dW = Ws[:, None, :] - Ws[ind_w]
         lin = [c for c in range(d) if c not in self._per]
         groups = ([lin] if lin else []) + [[c] for c in self._per]
         rms = np.empty((len(Theta), d))  # per-sample RMS of each group, so rcond is unit-free
         for g in groups:
             r = np.sqrt((dT[..., g] ** 2).sum(axis=2).mean(axis=1))
             rms[:, g] = np.maximum(r, np.finfo(float).tiny)[:, None]
-        Jt = np.linalg.pinv(dT / rms[:, None, :], rcond=0.1) @ dW / rms[:, :, None]  # (n, d, m)
+        pinv = np.linalg.pinv(dT / rms[:, None, :], rcond=0.1)  # (n, d, k)
+        norms = np.empty((len(Theta), len(groups)))
+        for s in range(0, len(Theta), 4096):  # (chunk, k, m) differences: bounded memory
+            sl = slice(s, s + 4096)
+            Jt = pinv[sl] @ (Ws[sl, None, :] - Ws[ind_w[sl]]) / rms[sl, :, None]  # (., d, m)
+            for i, g in enumerate(groups):
+                norms[sl, i] = np.linalg.norm(Jt[:, g, :], ord=2, axis=(1, 2))
         scale = np.empty(d)
-        for g in groups:
-            scale[g] = np.median(np.linalg.norm(Jt[:, g, :], ord=2, axis=(1, 2)))
+        for i, g in enumerate(groups):
+            scale[g] = np.median(norms[:, i])
             if not scale[g[0]] > 0:  # e.g. a piecewise-constant target: the poses of most
                 # feature-space neighbourhoods do not vary; use the global spread instead
                 spread = float(np.sqrt((dT[..., g] ** 2).sum(axis=2).mean()))

@@ -62,13 +62,22 @@ class GSEQueryMixin:
         with np.errstate(divide="ignore"):
             return np.log(np.linalg.det(S) ** 2)
 
+    def _query_w(self, Ws: Array, k: int) -> tuple[Array, Array]:
+        """k nearest training features (squared distances, indices) of standardised rows:
+        the HNSW index on the approximate path, else a KD-tree for a few rows (it beats a
+        GEMM over all samples) and a brute-force GEMM for many."""
+        if getattr(self, "_ws_index", None) is not None:
+            return self._ws_index.query(Ws, k)
+        if len(Ws) <= 32:
+            d, ind = self._ws_tree.query(Ws, k=k)
+            return (np.asarray(d).reshape(len(Ws), -1) ** 2,
+                    np.asarray(ind).reshape(len(Ws), -1))
+        return brute_knn(self._ws, self._ws_sqn, Ws, k)
+
     def _r_star(self, W: Array, jacobian: bool) -> tuple[Array, Array | None]:
         W = self._check_w(W)
         Ws = (W - self.w_mean_) / self.w_scale_
-        if len(Ws) <= 32:  # single queries: a KD-tree beats a GEMM over all samples
-            ind = np.asarray(self._ws_tree.query(Ws, k=self.jr_neighbors_)[1]).reshape(len(Ws), -1)
-        else:
-            ind = brute_knn(self._ws, self._ws_sqn, Ws, self.jr_neighbors_)[1]
+        ind = self._query_w(Ws, self.jr_neighbors_)[1]
         mask = self._mask(ind)
         bw = self.bandwidth_w_ * self.w_radius_[ind] if self.adaptive_bandwidth else self.bandwidth_w_
         r, J, log_sum = gaussian_jr(Ws[:, None, :] - self._ws[ind], self.embedding_[ind],

@@ -16,7 +16,6 @@ nearest neighbour's side of every cut.
 
 from __future__ import annotations
 
-import warnings
 from numbers import Integral, Real
 from pathlib import Path
 from typing import Any, ClassVar
@@ -34,18 +33,20 @@ from localization.gse.embedding import GrassmannStiefelEigenmaps
 from localization.gse.estimator_checks import regressor_expected_failed_checks
 from localization.gse.graph import (
     Array,
-    brute_knn,
     cuts_keep_connected,
-    knn_graph,
     local_pca,
     loop_coordinate,
+    pinv_blocks,
 )
+from localization.gse.incremental import add_regression_samples
 from localization.gse.io import load_regressor, save_regressor
 from localization.gse.jacobian_regression import (
     AGREEMENT_GRID,
     BANDWIDTH_GRID,
-    loo_bandwidth,
+    LooChunk,
+    loo_bandwidth_chunked,
 )
+from localization.gse.neighbors import ALGORITHMS, HNSWIndex, knn_graph_any, use_approximate
 from localization.gse.pose_block import PoseBlockMixin
 from localization.gse.queries import GSEQueryMixin
 from localization.gse.validation import validate_X, validate_y
@@ -59,19 +60,6 @@ def _broadcast_scale(theta_scale: object, d: int) -> Array:
         raise ValueError(f"theta_scale must be 'auto', a number or {d} numbers (one per pose "
                          f"column), got shape {scale.shape}")
     return np.broadcast_to(scale.ravel() if scale.ndim else scale, (d,)).copy()
-
-
-def pinv_blocks(H: Array, ridge: float = 0.0) -> Array:
-    """``(H^T H + ridge I)^{-1} H^T`` for a batch (n, a, b) -> (n, b, a), by q x q solves."""
-    HtH = np.swapaxes(H, 1, 2) @ H + ridge * np.eye(H.shape[2])
-    try:
-        return np.linalg.solve(HtH, np.swapaxes(H, 1, 2))
-    except np.linalg.LinAlgError:  # an exactly rank-deficient block (only with ridge=0)
-        warnings.warn("a block of the GSE frames is rank-deficient (the poses or features do "
-                      "not vary along the fitted manifold at some samples); using the "
-                      "minimum-norm pseudo-inverse there: pass ridge > 0 to regularise",
-                      RuntimeWarning, stacklevel=3)
-        return np.linalg.pinv(H)
 
 
 class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator):
@@ -130,6 +118,12 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         ``tau = agreement x`` the median y-distance to the jr_neighbors-th neighbour.
         Look-alike places among the feature-space neighbours then drop out. "auto":
         choose the factor (or none) with the bandwidth by leave-one-out.
+    algorithm : {"auto", "exact", "approximate"}, default="auto"
+        Neighbour search and solvers: "exact" (scikit-learn kNN, brute-force / KD-tree
+        queries, the eigensolvers of :class:`GrassmannStiefelEigenmaps`); "approximate",
+        the scalable path (faiss HNSW neighbours re-ranked by exact distance, AMG-
+        preconditioned LOBPCG and CG; docs/method.md §17); "auto": "approximate" from
+        :data:`~localization.gse.neighbors.APPROXIMATE_MIN_N` samples on.
 
     Attributes
     ----------
@@ -154,6 +148,8 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         Number of feature columns m.
     y_1d_ : bool
         Whether the poses were given as a 1-D array (:meth:`predict` then returns one too).
+    algorithm_ : str
+        The path that ran: "exact" or "approximate".
     """
 
     _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
@@ -175,6 +171,7 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         "loop_cut": [StrOptions({"auto", "none"})],
         "adaptive_bandwidth": ["boolean"],
         "agreement": [None, StrOptions({"auto"}), Interval(Real, 0, None, closed="neither")],
+        "algorithm": [StrOptions(set(ALGORITHMS))],
     }
 
     def __init__(self, n_components: int | None = None, n_neighbors: int = 20,
@@ -185,7 +182,8 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
                  out_of_domain: str = "raise", random_state: int = 0,
                  theta_scale_factor: float = 2.0, jr_neighbors: int | None = None,
                  kernel_grassmann: bool = False, loop_cut: str = "auto",
-                 adaptive_bandwidth: bool = False, agreement: float | str | None = None) -> None:
+                 adaptive_bandwidth: bool = False, agreement: float | str | None = None,
+                 algorithm: str = "auto") -> None:
         self.n_components = n_components
         self.n_neighbors = n_neighbors
         self.periodic = periodic
@@ -203,6 +201,7 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         self.loop_cut = loop_cut
         self.adaptive_bandwidth = adaptive_bandwidth
         self.agreement = agreement
+        self.algorithm = algorithm
 
     # --------------------------------------------------------------------- fit
     def __sklearn_tags__(self) -> Tags:
@@ -255,7 +254,8 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
             raise ValueError("W is constant: features carry no information")
         Ws = (W - self.w_mean_) / self.w_scale_
         self.theta_center_ = np.where(np.isin(np.arange(d), self._per), 0.0, Theta.mean(axis=0))
-        dist_w, ind_w = knn_graph(Ws, k)
+        self.algorithm_ = "approximate" if use_approximate(self.algorithm, n) else "exact"
+        dist_w, ind_w, self._ws_index = knn_graph_any(Ws, k, self.algorithm_ == "approximate")
         if isinstance(self.theta_scale, str):
             self.theta_scale_ = self.theta_scale_factor * self._auto_scale(Ws, Theta, ind_w)
         else:
@@ -278,7 +278,8 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         Z = np.column_stack([Ws, self._lift(Theta)])
         self.gse_ = GrassmannStiefelEigenmaps(
             q, n_neighbors=k, bandwidth=self.bandwidth, grassmann_kernel=self.grassmann_kernel,
-            out_of_domain=self.out_of_domain, random_state=self.random_state)
+            out_of_domain=self.out_of_domain, random_state=self.random_state,
+            algorithm=self.algorithm_)
         self.gse_.fit(Z, cut=self.cut_)
         self.gse_.select_recovery_bandwidth()
         H = self.gse_.frames_
@@ -297,6 +298,34 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         self._select_bandwidths(Ws, Theta, dist_w, ind_w)
         return self
 
+    def partial_fit(self, W: Array, y: Array) -> GSERegressor:
+        """Add samples to the fitted model without a refit (incremental GSE).
+
+        A local update (docs/method.md §18, :mod:`localization.gse.incremental`): the new
+        samples and the old ones whose neighbourhoods change get new tangents, frames,
+        coordinates and Jacobians ``G_r``, ``G_R``; everything else is kept, in particular
+        the standardisation of w, the pose scale, the cuts and the leave-one-out
+        bandwidths of the fit. Deterministic (the same data give the same model).
+
+        Parameters
+        ----------
+        W : array_like of shape (n_new, m)
+            Features of the new samples, with the m columns of the fit.
+        y : array_like of shape (n_new, d) or (n_new,)
+            Their poses Theta, in the layout of the fit (``y`` as in :meth:`fit` and
+            scikit-learn's ``partial_fit``).
+
+        Returns
+        -------
+        self
+            With ``partial_fit_rows_``: the rows whose model changed.
+        """
+        self._validate_params()
+        check_is_fitted(self, "gse_", msg="This %(name)s instance is not fitted yet: call "
+                        "'fit' before 'partial_fit' (partial_fit adds samples to a fitted "
+                        "model)")
+        return add_regression_samples(self, W, y)
+
     def _select_bandwidths(self, Ws: Array, Theta: Array, dist_w: Array, ind_w: Array) -> None:
         """Leave-one-out bandwidths (and agreement scale) of the two Jacobian regressions
         r* (features) and R* (poses)."""
@@ -304,7 +333,7 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         y = self.embedding_
         self.jr_neighbors_ = kj = min(self.jr_neighbors or k, n - 2)
         if kj != k:
-            d2, ind_w = brute_knn(Ws, self._ws_sqn, Ws, kj + 1)
+            d2, ind_w = self._query_w(Ws, kj + 1)
             ind_w, dist_w = ind_w[:, 1:], np.sqrt(d2[:, 1:])
         mask = self._mask(ind_w)
         grid = np.asarray(self.bandwidth_grid)
@@ -314,25 +343,34 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         taus = {"auto": (None, *AGREEMENT_GRID), None: (None,)}.get(self.agreement,  # type: ignore[call-overload]
                                                                     (self.agreement,))
         best = (np.inf, 0.0, None)
+        ad = self.adaptive_bandwidth
         for a in taus:
             tau = None if a is None else float(a) * y_radius
-            bw, mse = loo_bandwidth(
-                Ws[:, None, :] - Ws[ind_w], y[ind_w], self.Gr_[ind_w], y,
-                grid if self.adaptive_bandwidth else grid * np.median(dist_w[:, -1]), mask,
-                self._w_factor(Ws, ind_w), self.w_radius_[ind_w] if self.adaptive_bandwidth
-                else None, tau)
+
+            def chunk_w(sl: slice) -> LooChunk:
+                iw = ind_w[sl]
+                return (Ws[sl, None, :] - Ws[iw], y[iw], self.Gr_[iw], y[sl],
+                        None if mask is None else mask[sl], self._w_factor(Ws[sl], iw),
+                        self.w_radius_[iw] if ad else None)
+
+            bw, mse = loo_bandwidth_chunked(
+                n, chunk_w, grid if ad else grid * np.median(dist_w[:, -1]), tau)
             best = min(best, (float(mse.min()), bw, tau), key=lambda t: t[0])
         _, self.bandwidth_w_, self.agreement_ = best
         _, ind_t = self._zv_tree.query(self._zv, k=kj + 1)
         ind_t = ind_t[:, 1:]
-        dX = self._pose_diff(Theta, Theta[ind_t])
         mask = self._mask(ind_t)
-        self.theta_radius_ = np.linalg.norm(dX[:, -1], axis=1)
-        ad = self.adaptive_bandwidth
-        self.bandwidth_theta_, _ = loo_bandwidth(
-            dX, y[ind_t], self.GR_[ind_t], y,
-            grid if ad else grid * np.median(self.theta_radius_), mask, None,
-            self.theta_radius_[ind_t] if ad else None)
+        self.theta_radius_ = np.linalg.norm(self._pose_diff(Theta, Theta[ind_t[:, -1:]])[:, 0],
+                                            axis=1)
+
+        def chunk_t(sl: slice) -> LooChunk:
+            it = ind_t[sl]
+            return (self._pose_diff(Theta[sl], Theta[it]), y[it], self.GR_[it], y[sl],
+                    None if mask is None else mask[sl], None,
+                    self.theta_radius_[it] if ad else None)
+
+        self.bandwidth_theta_, _ = loo_bandwidth_chunked(
+            n, chunk_t, grid if ad else grid * np.median(self.theta_radius_))
 
     def _setup(self) -> None:
         """Derived per-sample query structures (after fit or load)."""
@@ -340,6 +378,11 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         self._ws = np.ascontiguousarray(self.gse_.Z_[:, :m])  # contiguous: fast GEMM queries
         self._ws_sqn = (self._ws ** 2).sum(axis=1)
         self._ws_tree = cKDTree(self._ws)
+        if self.gse_.algorithm_ == "approximate":
+            if getattr(self, "_ws_index", None) is None:
+                self._ws_index = HNSWIndex(self._ws)
+            elif self._ws_index.index.ntotal < len(self._ws):  # rows added by partial_fit
+                self._ws_index.add(self._ws)
         self._zv = np.ascontiguousarray(self.gse_.Z_[:, m:])
         self._zv_tree = cKDTree(self._zv)  # pose space is low-dimensional
         self.embedding_ = self.gse_.embedding_

@@ -190,6 +190,7 @@ def test_bench_gse_runs_its_scaling_workers(tmp_path: Path) -> None:
     """The GSE benchmark's workers run as ``python -m`` subprocesses of the workflow module."""
     out = tmp_path / "gse"
     proc = _cli("bench", "--only", "gse", "--gse-ns", "200,300", "--gse-skip-accuracy",
+                "--gse-skip-scalable", "--gse-skip-incremental",
                 "--gse-latency-repeats", "3", "--gse-batch-size", "50", "--gse-out", str(out))
     assert proc.returncode == 0, proc.stderr
     result = json.loads(out.with_suffix(".json").read_text())

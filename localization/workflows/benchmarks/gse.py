@@ -3,6 +3,10 @@ retrieval (``appearance-nav bench --only gse``; its options are ``--gse-<option>
 
     appearance-nav bench --only gse              # full run: n = 1000, 2500, 5000, 10000 (m = 64)
     appearance-nav bench --only gse --gse-quick  # smoke run: n <= 1000
+    appearance-nav bench --only gse --gse-scale-ns 10000,20000,40000,100000  # + the 100k row
+
+The scalable-path rows (10k-100k) and the partial_fit run (1000 into 50000) are described
+in :mod:`localization.workflows.benchmarks.gse_scale`.
 
 What is measured
 ----------------
@@ -53,6 +57,15 @@ from typing import Any
 
 import numpy as np
 
+from localization.workflows.benchmarks.gse_scale import (
+    incremental_markdown,
+    incremental_worker,
+    scalable_markdown,
+    scalable_summary,
+    scalable_worker,
+    scale_targets,
+)
+
 __all__ = ["GSEBenchConfig", "run_gse_bench"]
 
 #: the repository (the workers' working directory, the git commit of the report)
@@ -89,6 +102,18 @@ class GSEBenchConfig:
                                                  "smaller accuracy sets, fewer repeats"})
     out: str = field(default="", metadata={"help": "output prefix (default results/bench_gse, "
                                            "results/bench_gse_quick with --quick)"})
+    scale_ns: str = field(default="10000,20000,40000", metadata={
+        "help": "sizes n of the scalable-path rows (algorithm='approximate'); add 100000 for "
+                "issue 13's 100k targets (~2-5 min more)"})
+    compare_n: int = field(default=10000, metadata={
+        "help": "n at which the exact path is fitted beside the scalable one"})
+    incremental_n: int = field(default=50000, metadata={"help": "base model size of the "
+                                                        "partial_fit run"})
+    incremental_new: int = field(default=1000, metadata={"help": "samples added by partial_fit"})
+    skip_scalable: bool = field(default=False, metadata={"help": "skip the scalable-path rows"})
+    skip_incremental: bool = field(default=False, metadata={"help": "skip the partial_fit run"})
+    worker_kind: str = field(default="", metadata={"help": "internal: '', 'scalable' or "
+                                                   "'incremental' worker"})
     worker_n: int = field(default=0, metadata={"help": "internal: run one scaling worker"})
     worker_out: str = field(default="", metadata={"help": "internal: worker JSON output path"})
 
@@ -105,6 +130,12 @@ class GSEBenchConfig:
                 args.latency_repeats = 20
             if args.latency_n == GSEBenchConfig.latency_n:
                 args.latency_n = 1000
+            if args.scale_ns == GSEBenchConfig.scale_ns:
+                args.scale_ns = "2000,4000"
+                args.compare_n = 2000 if args.compare_n == GSEBenchConfig.compare_n \
+                    else args.compare_n
+            if args.incremental_n == GSEBenchConfig.incremental_n:
+                args.incremental_n, args.incremental_new = 3000, 100
         if not args.out:
             args.out = "results/bench_gse_quick" if args.quick else "results/bench_gse"
         return args
@@ -174,23 +205,29 @@ def run_worker(args: GSEBenchConfig) -> dict[str, Any]:
     return res
 
 
-def run_scaling(args: GSEBenchConfig) -> list[dict[str, Any]]:
+def run_scaling(args: GSEBenchConfig, kind: str = "", ns: str | None = None
+                ) -> list[dict[str, Any]]:
+    """Rows of one worker kind ('' = the exact/auto scaling rows, 'scalable',
+    'incremental'), each in a fresh subprocess."""
     env = dict(os.environ)
     if args.threads > 0:
         for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
             env[var] = str(args.threads)
     rows = []
-    for n in [int(s) for s in args.ns.split(",") if s.strip()]:
+    for n in [int(s) for s in (args.ns if ns is None else ns).split(",") if s.strip()]:
         with tempfile.TemporaryDirectory() as tmp:
             out = Path(tmp) / "worker.json"
             worker = GSEBenchConfig(worker_n=n, worker_out=str(out), m=args.m,
                                     seed=args.seed, map_seed=args.map_seed,
                                     n_neighbors=args.n_neighbors, batch_size=args.batch_size,
                                     latency_repeats=args.latency_repeats,
-                                    tracemalloc=args.tracemalloc)
+                                    tracemalloc=args.tracemalloc, worker_kind=kind,
+                                    compare_n=args.compare_n,
+                                    incremental_n=args.incremental_n,
+                                    incremental_new=args.incremental_new)
             cmd = [sys.executable, "-m", __spec__.name if __spec__ else __name__,
                    json.dumps(dataclasses.asdict(worker))]
-            print(f"[scaling] n = {n} ...", flush=True)
+            print(f"[{kind or 'scaling'}] n = {n} ...", flush=True)
             try:
                 proc = subprocess.run(cmd, check=False, env=env, cwd=ROOT,
                                       capture_output=True, text=True,
@@ -209,6 +246,11 @@ def run_scaling(args: GSEBenchConfig) -> list[dict[str, Any]]:
 def _fmt_row(r: dict[str, Any]) -> str:
     if "error" in r:
         return f"ERROR: {r['error']}"
+    if "partial_fit_s" in r:
+        return f"partial_fit {r['partial_fit_s']:.2f} s, refit {r['refit']['fit_s']:.1f} s"
+    if "predict_features_1_ms" not in r:
+        return (f"fit {r['fit_s']:.2f} s, +{r['peak_rss_delta_mib']:.0f} MiB, predict(1) "
+                f"{r['predict_1_ms']:.3f} ms, RRMSE {r['position_rrmse']:.5f}")
     return (f"fit {r['fit_s']:.2f} s, +{r['peak_rss_delta_mib']:.0f} MiB, predict(1) "
             f"{r['predict_1_ms']:.3f} ms, predict_features(1) {r['predict_features_1_ms']:.3f} ms")
 
@@ -317,6 +359,19 @@ def targets(args: GSEBenchConfig, scaling: list[dict[str, Any]], expo: float | N
     return out
 
 
+def _scale_parts(args: GSEBenchConfig, res: dict[str, Any]) -> None:
+    """The scalable-path rows and the partial_fit run (issue 13), into ``res``."""
+    res["scalable"] = [] if args.skip_scalable else run_scaling(args, "scalable", args.scale_ns)
+    res["scalable_summary"] = scalable_summary(res["scalable"])
+    res["incremental"] = None if args.skip_incremental else run_scaling(
+        args, "incremental", str(args.incremental_n))[0]
+    for name, value, limit, unit in scale_targets(res["scalable"], res["scalable_summary"],
+                                                  res["incremental"]):
+        status = "NOT RUN" if value is None else ("PASS" if value <= limit else "MISS")
+        res["targets"].append({"target": name, "value": value, "limit": limit, "unit": unit,
+                               "status": status})
+
+
 def markdown(args: GSEBenchConfig, res: dict[str, Any]) -> str:
     lines = [f"# GSE benchmark ({'quick' if args.quick else 'full'} run, {res['meta']['date']})",
              "", (f"Synthetic regression manifold, m = {args.m}, GSE n_neighbors = "
@@ -360,6 +415,10 @@ def markdown(args: GSEBenchConfig, res: dict[str, Any]) -> str:
                          f"{_f(r.get('phi_rrmse'), '{:.4f}')} | {_f(r.get('fit_s'), '{:.2f}')} | "
                          f"{note} |")
         lines.append("")
+    if res.get("scalable"):
+        lines += scalable_markdown(res["scalable"], res["scalable_summary"])
+    if res.get("incremental"):
+        lines += incremental_markdown(res["incremental"])
     if res["targets"]:
         lines += ["## Targets", "", "| target | value | limit | status |", "|---|---|---|---|"]
         for t in res["targets"]:
@@ -375,7 +434,9 @@ def run_gse_bench(args: GSEBenchConfig) -> dict[str, Any]:
     this process); write ``<out>.json`` / ``<out>.md``; return the result."""
     args = args.resolved()
     if args.worker_n:
-        Path(args.worker_out).write_text(json.dumps(run_worker(args)))
+        worker = {"": run_worker, "scalable": scalable_worker,
+                  "incremental": incremental_worker}[args.worker_kind]
+        Path(args.worker_out).write_text(json.dumps(worker(args), default=float))
         return {}
     import numpy
     import scipy
@@ -402,6 +463,7 @@ def run_gse_bench(args: GSEBenchConfig) -> dict[str, Any]:
             res["accuracy"] = run_accuracy(args)
     res["targets"] = targets(args, res["scaling"], res["growth_exponent"]) \
         if res["scaling"] else []
+    _scale_parts(args, res)
     res["meta"]["total_s"] = time.perf_counter() - t0
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
