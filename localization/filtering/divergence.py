@@ -29,9 +29,9 @@ therefore cannot move the belief; a kidnap is noticed in about ``window`` steps.
 Off by default (``BeliefFilter(detect_divergence=False)``, the wrapper's
 ``filter_options={"detect_divergence": True}`` turns it on). ``appearance-nav bench --only
 global`` (held-out cities 21-23, 120 kidnaps; docs/benchmarks.md §5): recovered within 30
-steps 38 % against 1 % for the EKF without it, but false restarts where psi* stays aliased
-for several steps while the EKF is right make nominal tracking worse (RMSE 2.94 m against
-1.65 m). Until that is fixed the EKF's nominal behaviour stays the default.
+steps 100 % (median 5) against 0 % for the EKF without it, but false restarts where psi*
+stays aliased for several steps while the EKF is right make nominal tracking worse (RMSE
+0.43 m against 0.065 m). Until that is fixed the EKF's nominal behaviour stays the default.
 """
 
 from __future__ import annotations
