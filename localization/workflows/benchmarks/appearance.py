@@ -2,7 +2,7 @@
 effects and moving things (``appearance-nav bench --only appearance``; its options are
 ``--appearance-<option>``).
 
-    appearance-nav bench --only appearance                   # ~6 CPU-minutes (25 min at load 13)
+    appearance-nav bench --only appearance                   # ~6 CPU-minutes, 10.5 min at load 3-7
     appearance-nav bench --only appearance --appearance-quick  # smoke run
 
 Cities ``cities`` (default 31, 32) were never used to tune anything (the presets were looked
