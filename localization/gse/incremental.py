@@ -4,8 +4,10 @@ The update is local. With ``U`` = the new samples plus the old samples whose k n
 neighbours change (a new sample comes closer than their k-th neighbour):
 
 1. neighbours: each new sample gets its k nearest among all samples; each old sample in
-   ``U`` merges the new candidates into its list (exact distances, so the graph equals the
-   kNN graph of the union on the exact path);
+   ``U`` merges the new candidates into its list (exact distances; on the exact path a
+   brute force against every old sample, so the graph equals the kNN graph of the union;
+   on the approximate path the old samples checked are the 2k nearest of each new one,
+   found with the HNSW index);
 2. tangents ``Q_i`` (local PCA with the kept bandwidth) are recomputed on ``U``;
 3. frames: old samples in ``U`` re-project their frame onto the new tangent,
    ``H_i = Q_i polar(Q_i^T H_i)``; new samples are aligned greedily outward from the
@@ -17,9 +19,10 @@ neighbours change (a new sample comes closer than their k-th neighbour):
    one sparse factorisation of size |U|).
 
 Everything else is kept: the bandwidths, the standardisation, the pose scale and the
-frames and coordinates of the samples outside ``U``. The cost is
-O(n_new n p) for the neighbour search (a BLAS brute force against the old samples) plus
-O(|U| k p q) for the local work; no global solve.
+frames and coordinates of the samples outside ``U``. The cost is O(n_new n p) for the
+neighbour search on the exact path (a BLAS brute force against the old samples), O(n_new
+log n) with the HNSW index of the approximate path, plus O(|U| k p q) for the local work
+and O(n log n) for the pose-space radii (a 4-D KD-tree); no global solve.
 """
 
 from __future__ import annotations
@@ -59,43 +62,69 @@ def _check_duplicates(d2: Array, scale: float, name: str) -> None:
 
 def _new_neighbors(gse: Any, Z: Array, n0: int, k: int, name: str
                    ) -> tuple[Array, NDArray[np.intp]]:
-    """k nearest samples (distances, indices) of each new row among all n rows (exact: a
-    BLAS brute force, the same O(n_new n p) as the search of :func:`_merge_old`; the
-    model's HNSW index gets the rows only once the update has succeeded)."""
+    """k nearest samples (distances, indices) of each new row among all n rows: among the
+    old rows by a BLAS brute force (exact path) or the model's HNSW index (approximate
+    path; it gets the new rows only once the update has succeeded), among the new rows
+    by brute force; exact distances."""
     Z_new = Z[n0:]
-    d2, ind = brute_knn(Z, (Z ** 2).sum(axis=1), Z_new, k + 1)
-    keep = ind != (n0 + np.arange(len(Z_new)))[:, None]
-    keep[keep.sum(axis=1) > k, -1] = False
-    d2, ind = d2[keep].reshape(-1, k), ind[keep].reshape(-1, k)
+    if getattr(gse, "_index", None) is not None:
+        d2o, io = gse._index.query(Z_new, k)
+    else:
+        d2o, io = brute_knn(Z[:n0], (Z[:n0] ** 2).sum(axis=1), Z_new, k)
+    d2n, in_ = brute_knn(Z_new, (Z_new ** 2).sum(axis=1), Z_new, min(k + 1, len(Z_new)))
+    d2n[in_ == np.arange(len(Z_new))[:, None]] = np.inf  # the row itself
+    d2 = np.concatenate([d2o, d2n], axis=1)
+    ind = np.concatenate([io, n0 + in_], axis=1)
+    order = np.argsort(d2, axis=1, kind="stable")[:, :k]
+    d2, ind = np.take_along_axis(d2, order, axis=1), np.take_along_axis(ind, order, axis=1)
     _check_duplicates(d2, float(np.median(gse.neighbor_distances_[:, -1])), name)
     return np.sqrt(d2), ind
+
+
+def _candidate_rows(index: Any, X_new: Array, k: int) -> NDArray[np.intp] | None:
+    """Old rows that may have a new row among their k nearest: with an HNSW index, the 2k
+    nearest old rows of every new row (kNN is nearly symmetric on a manifold sample);
+    None (all rows, exact) without one."""
+    if index is None:
+        return None
+    return np.unique(index.query(X_new, 2 * k)[1])
+
+
+def _close_rows(X: Array, rows: NDArray[np.intp] | None, X_new: Array, radius: Array
+                ) -> tuple[NDArray[np.intp], list[Array]]:
+    """The old rows (of ``rows``, or all) with a new row closer than their ``radius``,
+    and the squared distances (n_new, .) blocks of those rows (GEMM, bounded memory)."""
+    rows = np.arange(len(radius)) if rows is None else rows
+    sq = (X_new ** 2).sum(axis=1)
+    size = max(256, 2 ** 23 // len(X_new))  # (n_new, size) blocks: <= 64 MiB
+    hits, blocks = [], []
+    for s in range(0, len(rows), size):
+        r = rows[s:s + size]
+        xo = X[r]
+        d2 = np.maximum(sq[:, None] - 2.0 * X_new @ xo.T + (xo ** 2).sum(axis=1), 0.0)
+        # GEMM distances lose ~1e-12 relative: a margin, the exact merge decides
+        hit = np.flatnonzero((d2 < radius[r] ** 2 * (1 + 1e-8)).any(axis=0))
+        hits.append(r[hit])
+        blocks.append(d2[:, hit])
+    return (np.concatenate(hits) if hits else np.zeros(0, dtype=np.intp)), blocks
 
 
 def _merge_old(gse: Any, Z: Array, n0: int, k: int) -> tuple[NDArray[np.intp], Array, Array]:
     """Old rows whose kNN list gains a new sample, with their merged lists."""
     ind, dist = gse.neighbors_, gse.neighbor_distances_
     Z_new = Z[n0:]
-    sq_new = (Z_new ** 2).sum(axis=1)
-    rows, lists, dists = [], [], []
-    size = max(256, 2 ** 23 // len(Z_new))  # (n_new, size) distance blocks: <= 64 MiB
-    for s in range(0, n0, size):
-        zo = Z[s:min(s + size, n0)]
-        d2 = np.maximum(sq_new[:, None] - 2.0 * Z_new @ zo.T + (zo ** 2).sum(axis=1), 0.0)
-        # GEMM distances lose ~1e-12 relative: a margin, the exact merge below decides
-        hit = np.flatnonzero((d2 < dist[s:s + len(zo), -1] ** 2 * (1 + 1e-8)).any(axis=0))
-        if not hit.size:
-            continue
-        kk = min(k, len(Z_new))
-        top = np.argpartition(d2[:, hit].T, kk - 1, axis=1)[:, :kk]  # new candidates
-        cand = np.concatenate([ind[s + hit], n0 + top], axis=1)
-        exact = np.sqrt(((Z[cand] - Z[s + hit][:, None, :]) ** 2).sum(axis=2))
-        order = np.argsort(exact, axis=1, kind="stable")[:, :k]
-        rows.append(s + hit)
-        lists.append(np.take_along_axis(cand, order, axis=1))
-        dists.append(np.take_along_axis(exact, order, axis=1))
-    if not rows:
-        return np.zeros(0, dtype=np.intp), np.zeros((0, k), dtype=np.intp), np.zeros((0, k))
-    return np.concatenate(rows), np.concatenate(lists), np.concatenate(dists)
+    cand_rows = _candidate_rows(getattr(gse, "_index", None), Z_new, k)
+    hit, blocks = _close_rows(Z, cand_rows, Z_new, dist[:, -1])
+    if not hit.size:
+        return hit, np.zeros((0, k), dtype=np.intp), np.zeros((0, k))
+    d2 = np.concatenate(blocks, axis=1).T  # (hits, n_new)
+    kk = min(k, len(Z_new))
+    top = np.argpartition(d2, kk - 1, axis=1)[:, :kk]  # new candidates
+    cand = np.concatenate([ind[hit], n0 + top], axis=1)
+    exact = np.sqrt(((Z[cand] - Z[hit][:, None, :]) ** 2).sum(axis=2))
+    order = np.argsort(exact, axis=1, kind="stable")[:, :k]
+    return (hit, np.take_along_axis(cand, order, axis=1),
+            np.take_along_axis(exact, order, axis=1))
 
 
 def _local_edges(ind: NDArray[np.intp], U: NDArray[np.intp], cut: Array | None
@@ -209,26 +238,12 @@ def add_samples(gse: Any, Z_new: Array, cut_new: Array | None, name: str) -> NDA
     return np.sort(U)
 
 
-def _feature_hits(Ws_old: Array, Ws_new: Array, radius: Array) -> NDArray[np.intp]:
-    """Old rows with a new row closer than their feature-space radius (their
-    jr_neighbors-th neighbour)."""
-    sq = (Ws_new ** 2).sum(axis=1)
-    size = max(256, 2 ** 23 // len(Ws_new))
-    hits = []
-    for s in range(0, len(Ws_old), size):
-        wo = Ws_old[s:s + size]
-        d2 = sq[:, None] - 2.0 * Ws_new @ wo.T + (wo ** 2).sum(axis=1)
-        hits.append(s + np.flatnonzero((d2 < radius[s:s + size] ** 2 * (1 + 1e-8)).any(axis=0)))
-    return np.concatenate(hits)
-
-
 def add_regression_samples(model: Any, W_new: Array, Theta_new: Array) -> Any:
     """:meth:`GSERegressor.partial_fit <localization.gse.regressor.GSERegressor.partial_fit>`:
     validate, lift the new poses with the kept scale, add the joint vectors to the GSE
     (:func:`add_samples`) and recompute the per-sample Jacobians ``G_r``, ``G_R`` and radii
     on the rows that changed."""
     from localization.geometry import wrap_angle
-    from localization.gse.graph import brute_knn as knn
     from localization.gse.validation import validate_X, validate_y
 
     W = validate_X(model, W_new, "W", reset=False)
@@ -250,7 +265,9 @@ def add_regression_samples(model: Any, W_new: Array, Theta_new: Array) -> Any:
         lin = [c for c in range(d) if c not in model._per]
         near = cKDTree(model.theta_[:, lin]).query(Theta[:, lin])[1]
         cuts.append(model.loop_angle_[near])
-    w_hits = _feature_hits(model._ws, Ws, model.w_radius_)
+    w_hits, _ = _close_rows(model._ws, _candidate_rows(getattr(model, "_ws_index", None), Ws,
+                                                        model.jr_neighbors_),
+                            Ws, model.w_radius_)
     model.gse_._add(np.column_stack([Ws, model._lift(Theta)]),
                     np.column_stack(cuts) if cuts else None, "W")
     g = model.gse_
@@ -268,25 +285,22 @@ def add_regression_samples(model: Any, W_new: Array, Theta_new: Array) -> Any:
     model.pose_condition_, model._w_tangents = grow(model.pose_condition_), grow(model._w_tangents)
     model.w_radius_ = grow(model.w_radius_)
     H = g.frames_[changed]
-    Ws_all = np.ascontiguousarray(g.Z_[:, :m])
-    sq = (Ws_all ** 2).sum(axis=1)
-    moved = np.concatenate([w_hits, np.arange(n0, n)])  # feature-space neighbours changed
-    d2, _ = knn(Ws_all, sq, Ws_all[moved], model.jr_neighbors_ + 1)
-    model.w_radius_[moved] = np.sqrt(d2[:, -1])  # column 0 is the row itself
-    Gr = pinv_blocks(H[:, :m, :])
-    if model.project_features:  # G_r = G_u^- pi_W: pi_W from the feature-space neighbours
-        k = model.n_neighbors
-        d2, ind = knn(Ws_all, sq, Ws_all[changed], k + 1)
-        w = np.exp(-0.5 * d2[:, 1:] / model._pca_bw ** 2)
-        Uw = local_pca(Ws_all, Ws_all[changed], ind[:, 1:], w, Gr.shape[1])
-        Gr = (Gr @ Uw) @ np.swapaxes(Uw, 1, 2)
-    model.Gr_[changed] = Gr
     model._w_tangents[changed] = np.linalg.qr(H[:, :m, :])[0]
     Hv = H[:, m:, :]
     model.GR_[changed] = pinv_blocks(Hv, model.ridge) @ model._dlift(model.theta_[changed])
     s = np.linalg.svd(Hv, compute_uv=False)
     model.pose_condition_[changed] = s[:, 0] / np.maximum(s[:, -1], np.finfo(float).tiny)
-    model._setup()
+    model._setup()  # query structures of the union (the HNSW index grows by insertion)
+    moved = np.concatenate([w_hits, np.arange(n0, n)])  # feature-space neighbours changed
+    d2, _ = model._query_w(model._ws[moved], model.jr_neighbors_ + 1)
+    model.w_radius_[moved] = np.sqrt(d2[:, -1])  # column 0 is the row itself
+    Gr = pinv_blocks(H[:, :m, :])
+    if model.project_features:  # G_r = G_u^- pi_W: pi_W from the feature-space neighbours
+        d2, ind = model._query_w(model._ws[changed], model.n_neighbors + 1)
+        w = np.exp(-0.5 * d2[:, 1:] / model._pca_bw ** 2)
+        Uw = local_pca(model._ws, model._ws[changed], ind[:, 1:], w, Gr.shape[1])
+        Gr = (Gr @ Uw) @ np.swapaxes(Uw, 1, 2)
+    model.Gr_[changed] = Gr
     _, ind_t = model._zv_tree.query(model._zv, k=model.jr_neighbors_ + 1)  # O(n log n), 4-D
     model.theta_radius_ = np.linalg.norm(
         model._pose_diff(model.theta_, model.theta_[ind_t[:, -1:]])[:, 0], axis=1)
