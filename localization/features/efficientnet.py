@@ -29,6 +29,7 @@ from torch import nn
 
 __all__ = [
     "BLOCK_ARGS",
+    "LAYERS",
     "EfficientNetLite0",
     "load_efficientnet_lite0",
     "preprocess",
@@ -147,6 +148,20 @@ class EfficientNetLite0(nn.Module):
             x = block(x)
         return F.relu6(self._bn1(self._conv_head(x)))
 
+    def layer_maps(self, x: torch.Tensor, layer: str = "head") -> torch.Tensor:
+        """Feature maps of one layer (:data:`LAYERS`): ``"block{i}"`` is the output of
+        MBConv block i (0-15; channels and stride in :func:`layer_channels`), ``"head"`` the
+        final 1280 maps (:meth:`feature_maps`). Blocks after ``layer`` are not run."""
+        if layer == "head":
+            return self.feature_maps(x)
+        if layer not in LAYERS:
+            raise ValueError(f"layer must be one of {', '.join(LAYERS)}, got {layer!r}")
+        last = int(layer[len("block"):])
+        x = F.relu6(self._bn0(self._conv_stem(x)))
+        for block in self._blocks[:last + 1]:
+            x = block(x)
+        return x
+
     def features(self, x: torch.Tensor) -> torch.Tensor:
         """Globally average-pooled features, shape (n, 1280)."""
         return self.feature_maps(x).mean(dim=(2, 3))
@@ -154,6 +169,26 @@ class EfficientNetLite0(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """ImageNet logits, shape (n, num_classes)."""
         return self._fc(self.features(x))
+
+
+#: Layers :meth:`EfficientNetLite0.layer_maps` returns: every MBConv block, then the head.
+LAYERS: tuple[str, ...] = (*(f"block{i}" for i in range(sum(a[0] for a in BLOCK_ARGS))), "head")
+
+
+def layer_channels(layer: str) -> tuple[int, int]:
+    """(channels, total stride) of a layer of :data:`LAYERS` (e.g. block10: 112 maps at 1/16
+    of the input size; head: 1280 at 1/32)."""
+    if layer == "head":
+        return NUM_FEATURES, 32
+    if layer not in LAYERS:
+        raise ValueError(f"layer must be one of {', '.join(LAYERS)}, got {layer!r}")
+    i, stride = int(layer[len("block"):]), 2  # the stem has stride 2
+    for repeats, _, s, _, _, cout in BLOCK_ARGS:
+        stride *= s
+        if i < repeats:
+            return cout, stride
+        i -= repeats
+    raise AssertionError("unreachable")  # pragma: no cover
 
 
 def weights_path() -> Path:
