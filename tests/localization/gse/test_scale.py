@@ -58,7 +58,7 @@ def test_hnsw_index_finds_the_exact_neighbours_deterministically():
     d2b, indb = HNSWIndex(X).query(Xq, 10)  # a second build: the same graph
     assert np.array_equal(ind, indb) and np.array_equal(d2, d2b)
     far = Xq[:20] + 50.0  # far from the sample: the guard answers by brute force, exactly
-    d2f, indf = HNSWIndex(X).query(far, 10)
+    _, indf = HNSWIndex(X).query(far, 10)
     true = np.argsort(((far[:, None] - X[None]) ** 2).sum(-1), axis=1)[:, :10]
     np.testing.assert_array_equal(indf, true)
 
