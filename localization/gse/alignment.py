@@ -54,15 +54,15 @@ def landmark_frames(Z: Array, Q: Array, n_landmarks: int, n_neighbors: int, kern
     K = K * grassmann_kernel(S, kernel) + 1e-300
     Hl, _, _ = align_frames(Q[lm], ei, ej, K, n_refine=2, seed=seed, S=S)
     d2, nb = brute_knn(Z[lm], (Z[lm] ** 2).sum(axis=1), Z, n_neighbors)
-    Qt, Qlm = np.swapaxes(Q, 1, 2), Q[lm]
+    Qlm = Q[lm]
     H = np.empty_like(Q)
-    for s in range(0, n, _CHUNK):  # (chunk, k, p, q) gathers: bounded memory
-        sl = slice(s, s + _CHUNK)
+    for s in range(0, n, _CHUNK):  # (chunk, k, p, q) gathers: bounded memory (row-wise
+        sl = slice(s, s + _CHUNK)  # einsums: the same numbers as one unchunked call)
         with np.errstate(divide="ignore"):
             logw = -0.5 * d2[sl] / sigma ** 2 + np.log(grassmann_kernel(
-                Qt[sl, None] @ Qlm[nb[sl]], kernel))
+                np.einsum("npa,nkpb->nkab", Q[sl], Qlm[nb[sl]]), kernel))
         w, _ = softmax_weights(logw)
-        H[sl] = Q[sl] @ polar(Qt[sl] @ np.einsum("nk,nkpb->npb", w, Hl[nb[sl]]))
+        H[sl] = Q[sl] @ polar(np.einsum("npa,nk,nkpb->nab", Q[sl], w, Hl[nb[sl]]))
     return H
 
 
@@ -105,7 +105,7 @@ def align_frames(Q: Array, ei: Array, ej: Array, K: Array, n_refine: int = 5, se
         X0 = (np.random.default_rng(seed).standard_normal((n * q, q)) if H0 is None
               else (np.swapaxes(Q, 1, 2) @ H0).reshape(n * q, q))
         lam, V = connection_eigs(block_matrix(ei, ej, blocks, n), d, q + 1, X0, seed)
-        return _finish(Q, ei, ej, K, S, V, lam, n_refine)
+        return _finish(Q, ei, ej, K, S, V, lam, n_refine, blocks=True)
     a = np.arange(q)
     rows = (ei[:, None, None] * q + a[None, :, None]).repeat(q, axis=2)
     cols = (ej[:, None, None] * q + a[None, None, :]).repeat(q, axis=1)
@@ -117,20 +117,32 @@ def align_frames(Q: Array, ei: Array, ej: Array, K: Array, n_refine: int = 5, se
 
 
 def _finish(Q: Array, ei: Array, ej: Array, K: Array, S: Array, V: Array, lam: Array,
-            n_refine: int) -> tuple[Array, Array, Array]:
+            n_refine: int, blocks: bool = False) -> tuple[Array, Array, Array]:
     """Frames from the eigenvectors V (n q, >= q): polar blocks, then refinement sweeps.
 
-    A sweep ``H_i <- Q_i polar(Q_i^T sum_j K_ij H_j)`` runs on the q x q blocks, since
-    ``H_j = Q_j v_j``: ``v_i <- polar(sum_j K_ij S_ij v_j)`` with ``S_ij = Q_i^T Q_j``
-    (O(E q^3) a sweep instead of O(E p q)).
+    ``blocks=True`` (the scalable path) runs a sweep ``H_i <- Q_i polar(Q_i^T sum_j K_ij
+    H_j)`` on the q x q blocks, since ``H_j = Q_j v_j``: ``v_i <- polar(sum_j K_ij S_ij
+    v_j)`` with ``S_ij = Q_i^T Q_j`` (O(E q^3) a sweep instead of O(E p q); 73 s of a
+    loaded 100k fit were the p-space sweeps). The exact path keeps the p-space sweeps:
+    the same maths, but other rounding, and its results stay those of earlier releases
+    (a near-degenerate eigenspace turns a rounding change into another rotation of the
+    frames, harmless in theory but not for tests that replay closed loops).
     """
-    n, _, q = Q.shape
+    n, p, q = Q.shape
     v = V[:, :q].reshape(n, q, q)
     s = np.linalg.svd(v, compute_uv=False)
     condition = s[:, 0] / np.maximum(s[:, -1], np.finfo(float).tiny)
-    v = polar(v)
-    if n_refine:
-        KS = block_matrix(ei, ej, K[:, None, None] * S, n)
-        for _ in range(n_refine):
-            v = polar((KS @ v.reshape(n * q, q)).reshape(n, q, q))
-    return Q @ v, lam, condition
+    if blocks:
+        v = polar(v)
+        if n_refine:
+            KS = block_matrix(ei, ej, K[:, None, None] * S, n)
+            for _ in range(n_refine):
+                v = polar((KS @ v.reshape(n * q, q)).reshape(n, q, q))
+        return Q @ v, lam, condition
+    H = Q @ polar(v)
+    Ks = sparse.coo_matrix((K, (ei, ej)), shape=(n, n))
+    Ks = (Ks + Ks.T).tocsr()
+    for _ in range(n_refine):
+        M = (Ks @ H.reshape(n, p * q)).reshape(n, p, q)
+        H = Q @ polar(np.swapaxes(Q, 1, 2) @ M)
+    return H, lam, condition
