@@ -43,6 +43,9 @@ def check(args: Args) -> None:
                   non_negative=("seed", "split_seed"))
     if args.n < MIN_IMAGES:
         raise UsageError("n", f"must be >= {MIN_IMAGES} (images per data set), got {args.n}")
+    if args.imagenet_image_size < 32:
+        raise UsageError("imagenet_image_size", f"must be >= 32 (the network's smallest "
+                         f"input), got {args.imagenet_image_size}")
     if args.cv < 2:
         raise UsageError("cv", f"must be >= 2 (cross-validation folds), got {args.cv}")
     check_choices("features", args.features, EXTRACTORS)

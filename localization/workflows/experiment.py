@@ -18,7 +18,8 @@ the three regressors features -> pose of Table II, every hyper-parameter chosen 
   CV inside ``fit``, standardisation by CV.
 
 The feature dimension (leading PCA components) is chosen per method by the same CV
-(``feature_dims``).
+(``feature_dims``), and so is the feature *variant* (``variants``: e.g. the same PCA features
+whitened, :func:`whitened`).
 
 Errors: position RRMSE (:func:`~localization.metrics.rrmse` over x, y), median / 95th
 percentile / max position error in metres, and the heading RMSE when poses have a yaw.
@@ -38,7 +39,8 @@ from localization.gse.regressor import GSERegressor
 from localization.metrics import angular_rmse, rrmse
 from localization.model_selection import grid_search
 
-__all__ = ["GSE_GRID", "MethodResult", "evaluate_methods", "fit_gse", "position_errors"]
+__all__ = ["GSE_GRID", "MethodResult", "evaluate_methods", "fit_gse", "position_errors",
+           "whitened"]
 
 #: CV grid of the GSE regressor (JR bandwidth factors of the adaptive kernel: own grid).
 GSE_GRID: dict[str, list[Any]] = {"n_neighbors": [10, 20], "theta_scale_factor": [100.0]}
@@ -70,6 +72,14 @@ def position_errors(pred: Array, true: Array) -> dict[str, float]:
             "p95_m": float(np.percentile(e, 95)), "max_m": float(e.max())}
 
 
+def whitened(W_tr: Array, W_te: Array) -> tuple[Array, Array]:
+    """Both splits scaled by the training columns' standard deviations (PCA whitening for
+    PCA features: every component then weighs the same in distances)."""
+    sd = np.asarray(W_tr, dtype=np.float64).std(axis=0)
+    sd = np.where(sd > 0, sd, 1.0)
+    return W_tr / sd, W_te / sd
+
+
 def _gse(q: int, periodic: tuple[int, ...], seed: int, **params: Any) -> GSERegressor:
     return GSERegressor(n_components=q, periodic=periodic, adaptive_bandwidth=True,
                         agreement="auto", bandwidth_grid=ADAPTIVE_GRID,
@@ -92,6 +102,7 @@ def evaluate_methods(W_tr: Array, P_tr: Array, W_te: Array, P_te: Array, q: int,
                      gse_grid: dict[str, list[Any]] | None = None,
                      methods: tuple[str, ...] = ("gse", "knr", "knn"),
                      feature_dims: tuple[int, ...] | None = None,
+                     variants: dict[str, tuple[Array, Array]] | None = None,
                      ) -> tuple[list[MethodResult], dict[str, Array], dict[str, Any]]:
     """Fit every method on the training split (hyper-parameters by CV there) and score it
     on the test split. Returns the results, the test predictions and the fitted models,
@@ -100,24 +111,37 @@ def evaluate_methods(W_tr: Array, P_tr: Array, W_te: Array, P_te: Array, q: int,
     ``feature_dims``: candidate feature dimensions m, chosen per method by the same CV
     (the leading m columns: the features must be ordered by importance, like PCA
     components); None uses all columns. A model in the returned dict takes the leading
-    ``params["n_features"]`` columns."""
+    ``params["n_features"]`` columns.
+
+    ``variants``: other versions of the features, name -> (train, test) arrays of the same
+    shapes (e.g. :func:`whitened`), tried beside ``"plain"`` (``W_tr``, ``W_te``); each
+    method's CV chooses one, recorded in ``params["variant"]`` (only when variants are given).
+    """
     out, preds, models = [], {}, {}
     dims = [W_tr.shape[1]] if feature_dims is None else sorted(
         {min(int(m), W_tr.shape[1]) for m in feature_dims})
+    sets = {"plain": (W_tr, W_te), **(variants or {})}
+    for vname, (Vtr, Vte) in sets.items():
+        if np.shape(Vtr) != np.shape(W_tr) or np.shape(Vte) != np.shape(W_te):
+            raise ValueError(f"variants[{vname!r}] must have the shapes of W_tr, W_te "
+                             f"{np.shape(W_tr)}, {np.shape(W_te)}; got {np.shape(Vtr)}, "
+                             f"{np.shape(Vte)}")
     for name in methods:
         t0 = time.perf_counter()
         try:
             best = None
-            for m in dims:
-                model, params, rows = _fit_method(name, W_tr[:, :m], P_tr, q, periodic, cv,
-                                                  seed, gse_grid)
-                score = min(r["rrmse"] for r in rows)
-                rows = [{**r, "n_features": m} for r in rows]
-                if best is None or score < best[0]:
-                    best = (score, model, {**params, "n_features": m}, rows + best[3] if best
-                            else rows)
-                else:
-                    best = (*best[:3], best[3] + rows)
+            for vname, (Vtr, _) in sets.items():
+                for m in dims:
+                    model, params, rows = _fit_method(name, Vtr[:, :m], P_tr, q, periodic, cv,
+                                                      seed, gse_grid)
+                    score = min(r["rrmse"] for r in rows)
+                    tag = {"n_features": m, **({"variant": vname} if variants else {})}
+                    rows = [{**r, **tag} for r in rows]
+                    if best is None or score < best[0]:
+                        best = (score, model, {**params, **tag}, rows + best[3] if best
+                                else rows)
+                    else:
+                        best = (*best[:3], best[3] + rows)
             _, model, params, rows = best  # type: ignore[misc]
         except ValueError as exc:  # e.g. every GSE candidate has a disconnected graph
             nan = float("nan")
@@ -126,7 +150,8 @@ def evaluate_methods(W_tr: Array, P_tr: Array, W_te: Array, P_te: Array, q: int,
                                     fit_s=time.perf_counter() - t0))
             continue
         fit_s = time.perf_counter() - t0
-        pred = np.asarray(model.predict(W_te[:, :params["n_features"]]), dtype=np.float64)
+        test = sets[params.get("variant", "plain")][1]
+        pred = np.asarray(model.predict(test[:, :params["n_features"]]), dtype=np.float64)
         preds[name], models[name] = pred, model
         heading = angular_rmse(pred[:, 2], P_te[:, 2]) if P_te.shape[1] > 2 else None
         out.append(MethodResult(name, heading_rmse=heading, params=params, cv=rows,

@@ -7,10 +7,13 @@ position only) and n images at random 3-DoF poses, splits each 70/30 at random, 
 to ``out``:
 
 - Table 1: intrinsic dimension of the raw route images (global: Isomap residual variance,
-  local: correlation dimension, pointwise: Levina-Bickel MLE);
+  local: correlation dimension, pointwise: Levina-Bickel MLE), and of the random 3-DoF
+  images beside them;
 - Table 2: position RRMSE = sqrt(sum |theta_hat - theta|^2 / sum |theta - mean theta|^2)
   over (x, y) of GSE (psi*), KNR and kNN retrieval for every feature extractor, every
-  hyper-parameter chosen by cross-validation / leave-one-out on the training split only;
+  hyper-parameter chosen by cross-validation / leave-one-out on the training split only
+  (on the route also the feature dimension and whether the features are whitened);
+  the ImageNet features see images rendered at ``imagenet_image_size``;
   the random 3-DoF table adds the heading RMSE;
 - Figs. 2-3: a test image beside its GSE reduced (q numbers) and reconstructed version, and
   the tangent image (PixelPCA features, whose PCA inverse maps features back to images);
@@ -37,16 +40,21 @@ from threadpoolctl import threadpool_limits
 from localization.features import PixelPCA
 from localization.intrinsic_dim import intrinsic_dimension_table
 from localization.workflows import paper_report
-from localization.workflows.experiment import evaluate_methods, fit_gse
+from localization.workflows.experiment import evaluate_methods, fit_gse, whitened
 from localization.workflows.extractors import make_extractor
 
-__all__ = ["CAMERAS", "FEATURE_DIMS", "PaperConfig", "run_paper"]
+__all__ = ["CAMERAS", "FEATURE_DIMS", "WHITENING_CV", "PaperConfig", "run_paper"]
 
 CAMERAS = ("perspective", "fisheye", "catadioptric")
 #: Feature dimensions (leading PCA components) tried by the CV of every method on the route
 #: data (the paper's setting); the random 3-DoF data use all ``n_components`` (the 30-minute
 #: budget: GSE fits with q=3 dominate the run).
 FEATURE_DIMS = (16, 32)
+#: Extractors whose route features are also tried whitened (each method's CV chooses): the
+#: PCA features of pixels and of the ImageNet network, whose leading components carry most
+#: of the variance. Not the SmallCNN: its embedding is trained for distances as they are
+#: (whitened, GSE's CV took it on the perspective route and made one 21 m error: 0.0826).
+WHITENING_CV = ("pixel_pca", "pixel_pca_masked", "efficientnet", "efficientnet_global")
 
 
 @dataclass
@@ -54,7 +62,8 @@ class PaperConfig:
     """Settings of the experiment (the options of ``appearance-nav reproduce``)."""
 
     quick: bool = field(default=False, metadata={
-        "help": "small version (n=500, PixelPCA and SmallCNN only, small CV grid) for tests"})
+        "help": "small version (n=500, PixelPCA, ImageNet features at 96x96 and SmallCNN, "
+                "small CV grid) for tests"})
     cameras: str = field(default=",".join(CAMERAS), metadata={"help": "comma-separated cameras"})
     n: int = field(default=2500, metadata={"help": "images per data set (the paper: 2500)"})
     scene_seed: int = field(default=0, metadata={"help": "evaluation city (the SmallCNN "
@@ -62,6 +71,8 @@ class PaperConfig:
     seed: int = field(default=1, metadata={"help": "seed of data collection"})
     split_seed: int = field(default=0, metadata={"help": "seed of the 70/30 split and the CV"})
     image_size: int = field(default=64, metadata={"help": "rendered image side (pixels)"})
+    imagenet_image_size: int = field(default=128, metadata={
+        "help": "rendered image side for the ImageNet features (the network's input)"})
     n_components: int = field(default=32, metadata={
         "help": "PCA dimension of every feature (on the route each method uses the leading "
                 "16 or 32 by CV)"})
@@ -79,12 +90,13 @@ class PaperConfig:
     out: str = field(default="results/paper", metadata={"help": "output directory"})
 
     def resolved(self) -> PaperConfig:
-        """The settings actually run: ``quick`` shrinks n, the CV, the Table 1 subsample and
-        the feature list."""
+        """The settings actually run: ``quick`` shrinks n, the CV, the Table 1 subsample, the
+        ImageNet images and the feature list."""
         if not self.quick:
             return self
         return dataclasses.replace(self, n=min(self.n, 500), cv=2, intrinsic_samples=400,
-                                   features="pixel_pca,small_cnn")
+                                   imagenet_image_size=min(self.imagenet_image_size, 96),
+                                   features="pixel_pca,efficientnet,small_cnn")
 
 
 def run_paper(config: PaperConfig) -> dict[str, Any]:
@@ -108,10 +120,13 @@ def figure_model(images: np.ndarray, P: np.ndarray, tr: np.ndarray, te: np.ndarr
     return pca, gse, images, te
 
 
-def collect(camera: str, mode: str, args: PaperConfig) -> tuple[np.ndarray, np.ndarray]:
-    """``args.n`` images and poses of data set ``mode`` seen by ``camera``."""
+def collect(camera: str, mode: str, args: PaperConfig, size: int | None = None
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """``args.n`` images (side ``size``, default ``args.image_size``) and poses of data set
+    ``mode`` seen by ``camera``."""
+    size = args.image_size if size is None else int(size)
     env = gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, camera=camera,
-                   image_size=(args.image_size, args.image_size))
+                   image_size=(size, size))
     try:
         return envs.collect_dataset(env, args.n, mode, args.seed)
     finally:
@@ -133,34 +148,44 @@ def _run(args: PaperConfig) -> dict[str, Any]:
     t_start = time.perf_counter()
     idx = np.random.default_rng(args.split_seed).permutation(args.n)
     tr, te = np.sort(idx[: int(0.7 * args.n)]), np.sort(idx[int(0.7 * args.n):])
-    report: dict[str, Any] = {"args": dataclasses.asdict(args), "table1": {}, "table2": [],
-                              "figures": {}, "timing": {}}
+    report: dict[str, Any] = {"args": dataclasses.asdict(args), "table1": {},
+                              "table1_random": {}, "table2": [], "figures": {}, "timing": {}}
     figure_inputs = {}
     for camera in args.cameras.split(","):
         for mode in args.datasets.split(","):
             t0 = time.perf_counter()
             images, poses = collect(camera, mode, args)
             print(f"{camera} {mode}: {len(images)} images", flush=True)
-            if mode == "route":
-                report["table1"][camera] = _table1(images, args.intrinsic_samples)
+            table1 = report["table1"] if mode == "route" else report["table1_random"]
+            table1[camera] = _table1(images, args.intrinsic_samples)
             P = poses[:, :2] if mode == "route" else poses
             q, periodic = (1, ()) if mode == "route" else (3, (2,))
+            large = None
             for feat in args.features.split(","):
                 t1 = time.perf_counter()
-                extractor = make_extractor(feat, camera, mode, args.n_components,
-                                           args.image_size, args.ground_range,
-                                           args.num_threads)
-                W_tr = extractor.fit_transform(images[tr])
-                W_te = extractor.transform(images[te])
+                size, inputs = args.image_size, images
+                if feat.startswith("efficientnet"):
+                    if large is None:
+                        large, large_poses = collect(camera, mode, args, args.imagenet_image_size)
+                        if not np.allclose(large_poses, poses):
+                            raise RuntimeError(f"{camera} {mode}: the poses of the "
+                                               f"{args.imagenet_image_size}-pixel images differ")
+                    size, inputs = args.imagenet_image_size, large
+                extractor = make_extractor(feat, camera, mode, args.n_components, size,
+                                           args.ground_range, args.num_threads)
+                W_tr = extractor.fit_transform(inputs[tr])
+                W_te = extractor.transform(inputs[te])
                 t_feat = time.perf_counter() - t1
                 grid = ({"n_neighbors": [10], "theta_scale_factor": [100.0]} if args.quick
                         else None)
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", RuntimeWarning)  # weak eigen-gap notes
-                    results, _, _ = evaluate_methods(W_tr, P[tr], W_te, P[te], q, periodic,
-                                                     args.cv, args.split_seed, grid,
-                                                     feature_dims=FEATURE_DIMS
-                                                     if mode == "route" else None)
+                    route = mode == "route"
+                    results, _, _ = evaluate_methods(
+                        W_tr, P[tr], W_te, P[te], q, periodic, args.cv, args.split_seed, grid,
+                        feature_dims=FEATURE_DIMS if route else None,
+                        variants={"whitened": whitened(W_tr, W_te)}
+                        if route and feat in WHITENING_CV else None)
                 for r in results:
                     report["table2"].append({"camera": camera, "dataset": mode,
                                              "features": feat, "feature_s": t_feat,

@@ -21,7 +21,8 @@ PAPER_TABLE1 = {"perspective": (1, 11, 3), "fisheye": (1, 7, 3), "catadioptric":
 PAPER_TABLE2 = {"perspective": (0.045, 0.063), "fisheye": (0.037, 0.059),
                 "catadioptric": (0.039, 0.058)}
 FEATURE_NAMES = {"pixel_pca": "PixelPCA", "pixel_pca_masked": "PixelPCA, near ground masked",
-                 "efficientnet": "EfficientNet-Lite0 (ImageNet)",
+                 "efficientnet": "EfficientNet-Lite0 (ImageNet), block 10 pyramid",
+                 "efficientnet_global": "EfficientNet-Lite0 (ImageNet), global pool of the head",
                  "small_cnn": "SmallCNN (other cities)"}
 
 
@@ -109,13 +110,17 @@ def tables_markdown(report: dict[str, Any]) -> str:
     lines = [(f"# Section V reproduced: city {a['scene_seed']}, {a['image_size']}x"
              f"{a['image_size']} images, n = {a['n']} per data set, 70/30 random split "
              f"(seed {a['split_seed']})"), "",
-             "## Table 1: intrinsic dimension of the route images (raw pixels)", "",
+             ("## Table 1: intrinsic dimension of the route images (raw pixels; the random 3-DoF "
+              "images below)"), "",
              ("| camera | global (Isomap) | local (corr. dim.) | pointwise (MLE) | paper "
              "(global / local / pointwise) |"), "|---|---:|---:|---:|---|"]
     for cam, t in report["table1"].items():
         p = PAPER_TABLE1.get(cam, ("-",) * 3)
         lines.append(f"| {cam} | {t['global']:.0f} | {t['local']:.1f} | {t['pointwise']:.1f} "
                      f"| {p[0]} / {p[1]} / {p[2]} |")
+    for cam, t in (report.get("table1_random") or {}).items():
+        lines.append(f"| {cam}, random 3-DoF poses | {t['global']:.0f} | {t['local']:.1f} | "
+                     f"{t['pointwise']:.1f} | - |")
     rrmse = "RRMSE = sqrt(sum |theta_hat - theta|^2 / sum |theta - mean theta|^2) over (x, y)"
     lines += ["", "## Table 2: localization along the route (position only), " + rrmse, "",
               ("| camera | features | GSE | KNR | kNN | GSE / KNR | GSE median error (m) | "

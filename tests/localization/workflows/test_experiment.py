@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from localization.synthetic import route_manifold
-from localization.workflows.experiment import evaluate_methods, position_errors
+from localization.workflows.experiment import evaluate_methods, position_errors, whitened
 
 
 def test_route_harness_chooses_on_training_data_and_gse_wins():
@@ -32,3 +33,28 @@ def test_a_failing_method_is_recorded_not_raised():
     gse = res[0]
     assert np.isnan(gse.rrmse) and "connected components" in gse.params["error"]
     assert "gse" not in preds and np.isfinite(res[1].rrmse)
+
+
+def test_variants_are_chosen_by_cv_and_their_test_features_used():
+    W, T, _, _ = route_manifold(300, seed=0, lateral=0.001)
+    Wt, Tt, _, _ = route_manifold(100, seed=1, lateral=0.001)
+    rng = np.random.default_rng(0)
+    noise = (rng.normal(size=W.shape) * 50.0, rng.normal(size=Wt.shape) * 50.0)
+    res, preds, _ = evaluate_methods(W, T, Wt, Tt, q=1, cv=2, methods=("knn",),
+                                     variants={"noise": (W + noise[0], Wt + noise[1]),
+                                               "whitened": whitened(W, Wt)})
+    knn = res[0]
+    assert knn.params["variant"] in ("plain", "whitened")  # the noisy copy loses the CV
+    assert {row["variant"] for row in knn.cv} == {"plain", "noise", "whitened"}
+    assert np.isclose(knn.rrmse, position_errors(preds["knn"], Tt)["rrmse"])
+    with pytest.raises(ValueError, match="variants\\['bad'\\] must have the shapes"):
+        evaluate_methods(W, T, Wt, Tt, q=1, methods=("knn",), variants={"bad": (W[:, :3], Wt)})
+
+
+def test_whitened_scales_by_the_training_columns():
+    rng = np.random.default_rng(0)
+    W = rng.normal(size=(50, 3)) * [1.0, 10.0, 0.0]
+    a, b = whitened(W, W[:5])
+    np.testing.assert_allclose(a[:, :2].std(axis=0), 1.0)
+    np.testing.assert_array_equal(a[:, 2], 0.0)  # a constant column is left alone
+    np.testing.assert_array_equal(b, a[:5])

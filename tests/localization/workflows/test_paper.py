@@ -33,7 +33,8 @@ def quick_run(tmp_path_factory) -> Path:
 def test_quick_settings_shrink_the_run() -> None:
     quick = PaperConfig(quick=True).resolved()
     assert (quick.n, quick.cv, quick.intrinsic_samples) == (500, 2, 400)
-    assert quick.features == "pixel_pca,small_cnn"
+    assert quick.features == "pixel_pca,efficientnet,small_cnn"
+    assert quick.imagenet_image_size == 96 and PaperConfig().imagenet_image_size == 128
     assert PaperConfig(quick=True, n=300).resolved().n == 300
     assert PaperConfig().resolved() == PaperConfig()
 
@@ -47,8 +48,13 @@ def test_quick_run_writes_the_tables_and_figures(quick_run: Path) -> None:
     assert (quick_run / "reconstruction_tangent.png").stat().st_size > 10_000
     report = json.loads((quick_run / "results.json").read_text())
     assert set(report["table1"]) == {"perspective", "fisheye", "catadioptric"}
-    # 3 cameras x 2 data sets x 2 feature extractors x 3 methods
-    assert len(report["table2"]) == 36
+    assert set(report["table1_random"]) == {"perspective", "fisheye", "catadioptric"}
+    # 3 cameras x 2 data sets x 3 feature extractors x 3 methods
+    assert len(report["table2"]) == 54
+    route = [r for r in report["table2"] if r["dataset"] == "route"]
+    assert all(r["params"]["variant"] in ("plain", "whitened") for r in route
+               if r["features"] != "small_cnn")
+    assert all("variant" not in r["params"] for r in route if r["features"] == "small_cnn")
 
 
 def test_quick_run_gse_ahead_of_knr_along_the_route(quick_run: Path) -> None:
@@ -56,5 +62,5 @@ def test_quick_run_gse_ahead_of_knr_along_the_route(quick_run: Path) -> None:
     rows = {(r["camera"], r["features"], r["method"]): r["rrmse"]
             for r in report["table2"] if r["dataset"] == "route"}
     for cam in ("perspective", "fisheye", "catadioptric"):
-        for feat in ("pixel_pca", "small_cnn"):
+        for feat in ("pixel_pca", "efficientnet", "small_cnn"):
             assert rows[cam, feat, "gse"] < rows[cam, feat, "knr"], (cam, feat)
