@@ -55,6 +55,7 @@ from localization.geometry import wrap_angle
 from localization.localizer import AppearanceLocalizer, city_info
 from localization.workflows.benchmarks.coverage_report import THRESHOLDS, markdown
 from localization.workflows.tracking import (
+    distinct_views,
     fit_city_localizer,
     fit_city_noise,
     nees_band,
@@ -143,6 +144,7 @@ def fit_city(args: CoverageBenchConfig, env: gym.Env
         t0 = time.perf_counter()
         loc = AppearanceLocalizer(features_params={"n_components": args.n_components},
                                   noise_folds=0)
+        images, poses = distinct_views(loc, images, poses)
         loc.fit(images, poses, camera=env.unwrapped.camera_name, city=city_info(env))
         seconds["fit GSE"] = time.perf_counter() - t0
         W = loc.transform(images)
