@@ -159,3 +159,42 @@ def test_an_unreachable_ray_address_is_a_clear_error(monkeypatch: pytest.MonkeyP
         port = s.getsockname()[1]
     with pytest.raises(ConnectionError, match=rf"ray_address 'ray://127.0.0.1:{port}'"):
         map_tasks(abs, [1, 2], ray_address=f"ray://127.0.0.1:{port}", progress=False)
+
+
+# ---------------------------------------------------------------------------- evaluation
+def _eval(tmp_path: object, name: str, **kw: object) -> tuple[list[dict], dict]:
+    import json
+    from pathlib import Path
+
+    from localization.workflows.navigation import EvalConfig, evaluate_agents
+
+    out = Path(str(tmp_path)) / name
+    rows = evaluate_agents(EvalConfig(agents="scripted", sources="oracle", episodes=3,
+                                      image_size=16, max_episode_steps=300, out=str(out), **kw))
+    return rows, json.loads((out / "agents.json").read_text())
+
+
+def _without_wall_seconds(rows: list[dict]) -> str:
+    """The rows but their timing, as JSON (NaN == NaN there)."""
+    import json
+
+    return json.dumps([{k: v for k, v in r.items() if k != "wall_seconds"} for r in rows])
+
+
+def test_eval_sweep_on_processes_and_ray_equals_the_serial_one(tmp_path: object,
+                                                               ray_session: object) -> None:
+    rows, saved = _eval(tmp_path, "serial")
+    assert [e["seed"] for e in saved["episodes"]["scripted/oracle"]] == \
+        [2_000_000, 2_000_001, 2_000_002]
+    assert any(e["success"] for e in saved["episodes"]["scripted/oracle"])
+    for name, kw in (("processes", {"workers": 2}),
+                     ("ray", {"workers": 2, "ray_address": "auto"})):
+        other_rows, other = _eval(tmp_path, name, **kw)
+        assert other["episodes"] == saved["episodes"], name
+        assert _without_wall_seconds(other_rows) == _without_wall_seconds(rows), name
+        assert other["args"] == {**saved["args"], "out": str(tmp_path) + "/" + name}
+
+
+def test_eval_rerun_with_workers_is_refused(tmp_path: object) -> None:
+    with pytest.raises(ValueError, match="rerun"):
+        _eval(tmp_path, "x", workers=2, rerun=str(tmp_path) + "/e.rrd")
