@@ -60,7 +60,7 @@ from localization._validation import (
 from localization.recorded import load_dataset, save_dataset  # the .npz format, one definition
 
 __all__ = ["MODES", "PurePursuit", "collect_dataset", "drive_off_lane", "drive_route",
-           "drive_streets", "grid_poses", "load_dataset", "save_dataset"]
+           "drive_streets", "grid_poses", "load_dataset", "save_dataset", "slice_seed"]
 
 MODES = ("grid", "random", "route", "lanes", "coverage")
 #: the keyword arguments of :func:`envs.lanes.lane_poses` that ``collect_dataset`` passes on
@@ -192,7 +192,8 @@ def check_city_env(env: object, name: str = "env") -> Any:
 
 
 def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n_headings: int = 8,
-                    progress: bool = True, **lane_options: Any,
+                    progress: bool = True, start: int = 0, stop: int | None = None,
+                    **lane_options: Any,
                     ) -> tuple[NDArray[np.uint8], NDArray[np.float64]]:
     """Collect n camera images with their true poses.
 
@@ -204,6 +205,15 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
     seed : int — seeds the random poses / the env reset for "route" and "lanes".
     n_headings : int — headings per grid position ("grid" only).
     progress : bool — show a tqdm progress bar.
+    start, stop : int — collect only samples ``start .. stop - 1`` (default all n) of the
+        n-sample dataset ("grid", "random", "lanes", "coverage"; "route" is one drive: all
+        of it). The poses are those of the whole dataset. The per-sample randomness (the
+        looks of randomised conditions, the motion noise of the drive-in) restarts at
+        ``start`` from the env reset with :func:`slice_seed` ``(seed, start)``. Slices of
+        "grid" and "random" without that randomness equal the whole run's exactly; "lanes"
+        slices equal it in the images and within rounding (~1e-15) in the poses (the wheels'
+        joint angles carry over from drive to drive). The same slices always give the same
+        samples (``appearance-nav collect --workers`` collects in fixed slices).
     **lane_options : keyword arguments of :func:`envs.lanes.lane_poses` ("lanes" only):
         ``lanes`` ("streets" or "route"), ``lateral``, ``heading``, ``turn_radius``,
         ``turn_weight``; or of :func:`envs.coverage.coverage_poses` ("coverage" only):
@@ -233,14 +243,16 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
         check_options(lane_options, "lane option", LANE_OPTIONS)
     if lane_options and mode not in ("lanes", "coverage"):
         raise ValueError(f"lane options {sorted(lane_options)} apply to mode 'lanes' only")
+    start, stop = _check_slice(start, stop, n, mode)
+    stream = slice_seed(seed, start)
     city = base.city
-    images = np.empty((n, *base.image_size, 3), np.uint8)
-    poses = np.empty((n, 3))
-    bar = tqdm(total=n, desc=f"collect {mode}", disable=not progress, leave=False)
+    images = np.empty((stop - start, *base.image_size, 3), np.uint8)
+    poses = np.empty((stop - start, 3))
+    bar = tqdm(total=stop - start, desc=f"collect {mode}", disable=not progress, leave=False)
     vary = bool(getattr(base, "randomised_conditions", False))
     redraw = base.set_conditions if vary else (lambda: None)
     if vary and mode != "route":
-        base.reset(seed=seed)
+        base.reset(seed=stream)
     if mode == "route":
         pilot = PurePursuit(city.route(), w_max=base.W_MAX)
         obs, info = base.reset(seed=seed, options={"pose": pilot.start_pose()})
@@ -253,8 +265,8 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
     elif mode == "lanes":
         targets, curvature = lane_poses(city, n, np.random.default_rng(seed),
                                         margin=POSE_MARGIN, **lane_options)
-        base.reset(seed=seed)  # seeds the motion noise of the drive-in
-        for i, (target, k) in enumerate(zip(targets, curvature)):
+        base.reset(seed=stream)  # seeds the motion noise of the drive-in
+        for i, (target, k) in enumerate(zip(targets[start:stop], curvature[start:stop])):
             images[i], poses[i] = _drive_into(base, target, k, ROLL_STEPS, redraw)
             bar.update()
     elif mode == "coverage":
@@ -262,8 +274,8 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
         targets = coverage_poses(city, n, rng, margin=POSE_MARGIN, **lane_options)
         controls = np.column_stack([rng.uniform(0.0, CRUISE_SPEED, n),
                                     rng.uniform(-base.W_MAX, base.W_MAX, n)])
-        base.reset(seed=seed)  # seeds the motion noise of the drive-in
-        for i, (target, (v, w)) in enumerate(zip(targets, controls)):
+        base.reset(seed=stream)  # seeds the motion noise of the drive-in
+        for i, (target, (v, w)) in enumerate(zip(targets[start:stop], controls[start:stop])):
             images[i], poses[i] = _drive_in(base, target, v, w, ROLL_STEPS, redraw)
             bar.update()
     else:
@@ -271,14 +283,34 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
             targets = grid_poses(city, n, n_headings)
         else:
             rng = np.random.default_rng(seed)
-            targets = np.array([city.random_free_pose(rng, POSE_MARGIN) for _ in range(n)])
-        for i, target in enumerate(targets):
+            targets = np.array([city.random_free_pose(rng, POSE_MARGIN) for _ in range(stop)])
+        for i, target in enumerate(targets[start:stop]):
             base.set_pose(target)
             redraw()
             images[i], poses[i] = base.render_camera(), base.pose
             bar.update()
     bar.close()
     return images, poses
+
+
+def slice_seed(seed: int, start: int) -> int:
+    """The env reset seed of the samples from ``start`` on in :func:`collect_dataset`:
+    ``seed`` itself at 0 (the whole run), else one drawn from ``SeedSequence([seed, start])``."""
+    if start == 0:
+        return seed
+    return int(np.random.SeedSequence([seed, start]).generate_state(1, np.uint32)[0])
+
+
+def _check_slice(start: object, stop: object, n: int, mode: str) -> tuple[int, int]:
+    """``(start, stop)`` as ints with ``0 <= start < stop <= n`` (stop None: n)."""
+    start = check_int(start, "start", low=0)
+    stop = n if stop is None else check_int(stop, "stop", low=1)
+    if not start < stop <= n:
+        raise ValueError(f"start, stop must satisfy 0 <= start < stop <= n = {n}, "
+                         f"got start={start}, stop={stop}")
+    if mode == "route" and (start, stop) != (0, n):
+        raise ValueError("mode 'route' is one continuous drive: start and stop must be 0 and n")
+    return start, stop
 
 
 def drive_route(env: gym.Env, n: int, seed: int = 0, start: int = 0, progress: bool = True,

@@ -3,6 +3,8 @@
     appearance-nav eval --episodes 100
     appearance-nav eval --agents scripted --sources oracle,dead_reckoning
     appearance-nav eval --agents scripted --episodes 5 --rerun results/eval.rrd
+    appearance-nav eval --episodes 400 --workers 2           # 2 local worker processes
+    appearance-nav eval --episodes 4000 --workers 64 --ray-address auto   # a Ray cluster
 
 For every agent (the scripted street navigator; PPO policies trained by
 ``appearance-nav train``, each evaluated on the pose source it was trained on; a missing
@@ -11,7 +13,11 @@ belief from images, dead_reckoning = the motion model alone), the same ``episode
 (seeds ``seed .. seed + episodes - 1``) are run. Writes ``<out>/agents.md`` (table) and
 ``<out>/agents.json`` (summary and every episode). ``--rerun FILE.rrd`` (the ``viewer`` extra)
 also records the first ``--rerun-episodes`` episodes of each agent and source, step by step,
-for the Rerun viewer (``rerun FILE.rrd``).
+for the Rerun viewer (``rerun FILE.rrd``; in this process only: ``--workers 1``).
+
+``--workers N`` splits the episodes by seed over N local processes, ``--ray-address`` runs
+them as Ray tasks (the ``distributed`` extra); each worker builds its own env and agent, so
+every episode's record is the serial run's.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ import localization.workflows.sim  # noqa: F401  (chooses MUJOCO_GL before mujoc
 # isort: split
 from agents.sources import POSE_SOURCES, STARTS
 from localization.cli._args import (
+    UsageError,
     check_choice,
     check_choices,
     check_env,
@@ -28,6 +35,7 @@ from localization.cli._args import (
     check_numbers,
     check_output_dir,
 )
+from localization.cli._parallel import check_parallel
 from localization.cli._rerun import check_rerun
 from localization.localizer import MEASUREMENTS
 from localization.workflows.navigation import AGENTS, EvalConfig, evaluate_agents
@@ -51,6 +59,10 @@ def check(args: Args) -> None:
                   non_negative=("seed", "rerun_episodes"))
     check_output_dir("out", args.out)
     check_rerun(args.rerun)
+    check_parallel(args)
+    if args.rerun and (args.workers != 1 or args.ray_address):
+        raise UsageError("rerun", "records the episodes in this process: use it with "
+                                  "--workers 1 and no --ray-address")
 
 
 def run(args: Args) -> None:

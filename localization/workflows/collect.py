@@ -3,10 +3,20 @@
 
 The file holds ``images`` (n, H, W, 3) uint8, ``poses`` (n, 3) float64 ``[x, y, yaw]`` and
 ``meta`` (a JSON string with the settings); read it with ``envs.load_dataset``.
+
+The n samples are collected in slices of :data:`CHUNK` (``envs.collect_dataset``'s
+``start``/``stop``), one task each, by :func:`~localization.workflows.parallel.map_tasks`:
+in this process, on ``workers`` local processes or on Ray, each worker building its own env.
+The slices do not depend on the number of workers, so neither do the arrays. For "grid" and
+"random" without randomised conditions they equal one ``collect_dataset`` call's; where each
+sample draws from the env's random streams (``conditions="random"``, the "lanes" drive-in's
+motion noise or traffic) each slice restarts them from its own seed
+(``envs.datasets.slice_seed``). "route" is one continuous drive: one task.
 """
 
 from __future__ import annotations
 
+import atexit
 import dataclasses
 import time
 from dataclasses import dataclass, field
@@ -16,8 +26,18 @@ import envs  # chooses MUJOCO_GL before mujoco is imported
 
 # isort: split
 import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
 
-__all__ = ["CollectConfig", "collect_out_path", "collect_to_file"]
+from localization.workflows.parallel import RAY_ADDRESS_HELP, WORKERS_HELP, map_tasks
+
+__all__ = ["CHUNK", "CollectConfig", "CollectTask", "collect_arrays", "collect_out_path",
+           "collect_slice", "collect_tasks", "collect_to_file"]
+
+#: samples per collection task (fixed: the arrays must not depend on the number of workers)
+CHUNK = 500
+#: the options that say how, not what, to collect (left out of the file's meta)
+RUN_OPTIONS = ("workers", "ray_address")
 
 
 @dataclass
@@ -42,6 +62,8 @@ class CollectConfig:
                 "except in route mode: randomised training data)"})
     out: str = field(default="", metadata={
         "help": "output .npz (default data/<mode>_scene<scene_seed>_<camera>.npz)"})
+    workers: int = field(default=1, metadata={"help": WORKERS_HELP})
+    ray_address: str = field(default="", metadata={"help": RAY_ADDRESS_HELP})
 
 
 def collect_out_path(args: CollectConfig) -> Path:
@@ -50,19 +72,83 @@ def collect_out_path(args: CollectConfig) -> Path:
     return out if out.suffix == ".npz" else out.with_name(out.name + ".npz")
 
 
+@dataclass(frozen=True)
+class CollectTask:
+    """One slice ``start .. stop - 1`` of the dataset ``config`` describes."""
+
+    config: CollectConfig
+    start: int
+    stop: int
+
+
+_ENVS: dict[tuple, gym.Env] = {}  # this process's env per setting (workers reuse theirs)
+
+
+def _env(c: CollectConfig) -> gym.Env:
+    """The env of ``c``'s settings, made once per process."""
+    key = (c.scene_seed, c.camera, c.height, c.width, c.motion_noise, c.conditions)
+    if key not in _ENVS:
+        _ENVS[key] = gym.make("AppearanceNav-v0", scene_seed=c.scene_seed, camera=c.camera,
+                              image_size=(c.height, c.width), motion_noise=c.motion_noise,
+                              conditions=c.conditions)
+    return _ENVS[key]
+
+
+@atexit.register
+def close_envs() -> None:
+    """Close the envs this process made (their renderers)."""
+    while _ENVS:
+        _ENVS.popitem()[1].close()
+
+
+def collect_slice(task: CollectTask,
+                  ) -> tuple[NDArray[np.uint8], NDArray[np.float64], dict[str, float]]:
+    """Samples ``task.start .. task.stop - 1``: images (m, H, W, 3) uint8, poses (m, 3)
+    float64, and the env's ``dt`` and ``city_size``."""
+    c = task.config
+    env = _env(c)
+    images, poses = envs.collect_dataset(env, c.n, c.mode, seed=c.seed, n_headings=c.n_headings,
+                                         progress=False, start=task.start, stop=task.stop)
+    return images, poses, {"dt": env.unwrapped.dt, "city_size": env.unwrapped.city.size}
+
+
+def collect_tasks(args: CollectConfig) -> list[CollectTask]:
+    """The slices of :data:`CHUNK` samples ("route": one task, the whole drive)."""
+    step = args.n if args.mode == "route" else CHUNK
+    return [CollectTask(args, a, min(a + step, args.n)) for a in range(0, args.n, step)]
+
+
+def collect_arrays(args: CollectConfig, progress: bool = True,
+                   ) -> tuple[NDArray[np.uint8], NDArray[np.float64], dict]:
+    """Collect ``args.n`` samples with ``args.workers`` workers (or on Ray).
+
+    Returns
+    -------
+    images : (n, H, W, 3) uint8
+    poses : (n, 3) float64 ``[x, y, yaw]``
+    env_meta : dict — ``dt`` and ``city_size`` of the env.
+    """
+    tasks = collect_tasks(args)
+    try:
+        parts = map_tasks(collect_slice, tasks, workers=args.workers,
+                          ray_address=args.ray_address, progress=progress,
+                          desc=f"collect {args.mode} ({len(tasks)} slices)")
+    finally:
+        close_envs()  # the serial run's
+    return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
+            parts[0][2])
+
+
 def collect_to_file(args: CollectConfig) -> Path:
     """Collect ``args.n`` images and poses (progress bar) and save them; returns the file."""
     out = collect_out_path(args)
-    env = gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, camera=args.camera,
-                   image_size=(args.height, args.width), motion_noise=args.motion_noise,
-                   conditions=args.conditions)
     t0 = time.perf_counter()
-    images, poses = envs.collect_dataset(env, args.n, args.mode, seed=args.seed,
-                                         n_headings=args.n_headings)
+    images, poses, env_meta = collect_arrays(args)
     seconds = time.perf_counter() - t0
-    env.close()
-    path = envs.save_dataset(out, images, poses, **dataclasses.asdict(args), dt=env.unwrapped.dt,
-                             city_size=env.unwrapped.city.size)
+    settings = {k: v for k, v in dataclasses.asdict(args).items() if k not in RUN_OPTIONS}
+    path = envs.save_dataset(out, images, poses, **settings, **env_meta,
+                             chunk=CHUNK if args.mode != "route" else args.n)
     print(f"wrote {path}: images {images.shape}, poses {poses.shape} in {seconds:.1f} s "
-          f"({args.n / seconds:.0f} samples/s)")
+          f"({args.n / seconds:.0f} samples/s, {args.workers} worker(s)"
+          f"{' on Ray' if args.ray_address else ''})")
     return path

@@ -12,28 +12,38 @@ motion model alone), the same ``episodes`` resets (start pose and goal, seeds
 Columns: success rate (goal reached before truncation), path ratio (distance driven / shortest
 street path, over successes), collision episodes (share of episodes with any contact), time
 to goal (simulated seconds, over successes), belief RMSE (m, belief mean vs true position).
+
+With ``workers > 1`` or a ``ray_address`` the episodes of each agent and source are split by
+seed into tasks (:func:`~localization.workflows.parallel.map_tasks`); each worker builds its
+own env and agent, and an episode depends only on its reset seed, so every record equals the
+serial run's (only ``wall_seconds`` differs: the summed seconds of the row's tasks).
 """
 
 from __future__ import annotations
 
+import atexit
 import dataclasses
 import json
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
 
 # isort: split
-from agents.evaluation import as_records, run_episodes, summarize
+from agents.evaluation import Episode, as_records, run_episodes, summarize
 from agents.ppo import PPOAgent
 from agents.scripted import ScriptedAgent
 from agents.sources import POSE_SOURCES, make_pose_env
 from localization.localizer import AppearanceLocalizer
 from localization.workflows.agent_env import AgentEnvSettings, city_options
+from localization.workflows.parallel import RAY_ADDRESS_HELP, WORKERS_HELP, map_tasks
 from localization.workflows.rerun_log import RerunLog, RerunRecorder
 
-__all__ = ["AGENTS", "EvalConfig", "agents_table", "evaluate_agents"]
+__all__ = ["AGENTS", "EvalConfig", "EvalTask", "agents_table", "evaluate_agents",
+           "run_eval_task"]
 
 #: the navigators :func:`evaluate_agents` knows
 AGENTS = ("scripted", "ppo")
@@ -56,6 +66,8 @@ class EvalConfig(AgentEnvSettings):
         "help": "also record episodes to this Rerun .rrd file (the viewer extra); empty: none"})
     rerun_episodes: int = field(default=1, metadata={
         "help": "with --rerun: the first this many episodes of each agent and source"})
+    workers: int = field(default=1, metadata={"help": WORKERS_HELP})
+    ray_address: str = field(default="", metadata={"help": RAY_ADDRESS_HELP})
 
 
 def agents_table(rows: list[dict]) -> str:
@@ -70,47 +82,147 @@ def agents_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def evaluate_agents(args: EvalConfig) -> list[dict]:
-    """Run every agent on every pose source; write ``agents.md`` / ``agents.json`` to
-    ``args.out``; return one summary row per (agent, source)."""
-    sources = args.sources.split(",")
+def _make_env(args: EvalConfig, source: str, localizer: AppearanceLocalizer | None) -> Any:
+    """The pose env of ``source`` (the settings of ``args``)."""
+    return make_pose_env(source, localizer, measurement=args.measurement or None,
+                         scene_seed=args.scene_seed, camera=args.camera,
+                         image_size=(args.image_size, args.image_size),
+                         motion_noise=args.motion_noise,
+                         max_episode_steps=args.max_episode_steps, start=args.start,
+                         **city_options(source, args.allow_other_city))
+
+
+def _policy(args: EvalConfig, source: str) -> Path:
+    return Path(args.policies) / source / "policy.pt"
+
+
+def _make_agent(args: EvalConfig, name: str, source: str, city: Any) -> Any:
+    """The navigator ``name`` for ``source`` (PPO: its policy must exist)."""
+    return ScriptedAgent(city) if name == "scripted" else PPOAgent.load(_policy(args, source),
+                                                                        city)
+
+
+def _runs(args: EvalConfig, sources: list[str]) -> list[tuple[str, str]]:
+    """The (agent, source) pairs to run, in table order (PPO without a policy: a note)."""
+    pairs = []
+    for source in sources:
+        for name in args.agents.split(","):
+            if name == "ppo" and not _policy(args, source).exists():
+                print(f"skipping ppo on {source}: no {_policy(args, source)} "
+                      "(run appearance-nav train)")
+                continue
+            pairs.append((name, source))
+    return pairs
+
+
+@dataclass(frozen=True)
+class EvalTask:
+    """The episodes of one agent on one pose source with the given reset seeds."""
+
+    config: EvalConfig
+    agent: str
+    source: str
+    seeds: tuple[int, ...]
+
+
+_ENVS: dict[tuple, Any] = {}  # this worker's pose env per (settings, source)
+_LOCALIZERS: dict[str, AppearanceLocalizer] = {}
+
+
+@atexit.register
+def close_envs() -> None:
+    """Close the pose envs this process made for :func:`run_eval_task`."""
+    while _ENVS:
+        _ENVS.popitem()[1].close()
+
+
+def run_eval_task(task: EvalTask) -> tuple[list[Episode], float]:
+    """Run ``task``'s episodes (its env made once per process); episodes and seconds taken."""
+    args, t0 = task.config, time.perf_counter()
+    key = (dataclasses.astuple(dataclasses.replace(args, workers=1, ray_address="")),
+           task.source)
+    if key not in _ENVS:
+        localizer = None
+        if task.source != "oracle":
+            if args.localizer not in _LOCALIZERS:
+                _LOCALIZERS[args.localizer] = AppearanceLocalizer.load(args.localizer)
+            localizer = _LOCALIZERS[args.localizer]
+        _ENVS[key] = _make_env(args, task.source, localizer)
+    env = _ENVS[key]
+    agent = _make_agent(args, task.agent, task.source, env.unwrapped.city)
+    runs = run_episodes(env, agent, task.seeds, progress=False)
+    return runs, time.perf_counter() - t0
+
+
+def _evaluate_parallel(args: EvalConfig, pairs: list[tuple[str, str]],
+                       ) -> dict[tuple[str, str], tuple[list[Episode], float]]:
+    """Every pair's episodes, split by seed into tasks over the workers."""
+    seeds = list(range(args.seed, args.seed + args.episodes))
+    size = max(1, math.ceil(len(seeds) * len(pairs) / (4 * args.workers)))  # ~4 tasks a worker
+    tasks = [EvalTask(args, name, source, tuple(seeds[i:i + size]))
+             for name, source in pairs for i in range(0, len(seeds), size)]
+    results = map_tasks(run_eval_task, tasks, workers=args.workers,
+                        ray_address=args.ray_address, desc=f"episodes ({len(tasks)} tasks)")
+    runs: dict[tuple[str, str], tuple[list[Episode], float]] = {p: ([], 0.0) for p in pairs}
+    for task, (episodes, seconds) in zip(tasks, results):
+        done, total = runs[task.agent, task.source]
+        runs[task.agent, task.source] = (done + episodes, total + seconds)
+    return runs
+
+
+def _evaluate_serial(args: EvalConfig, pairs: list[tuple[str, str]],
+                     ) -> dict[tuple[str, str], tuple[list[Episode], float]]:
+    """Every pair's episodes in this process (one env per source; optional Rerun log)."""
     localizer = None
-    if set(sources) - {"oracle"}:
+    if {source for _, source in pairs} - {"oracle"}:
         localizer = AppearanceLocalizer.load(args.localizer)
     seeds = range(args.seed, args.seed + args.episodes)
-    rows, episodes = [], {}
     log = RerunLog(args.rerun) if args.rerun else None
-    for source in sources:
-        env = make_pose_env(source, localizer, measurement=args.measurement or None,
-                            scene_seed=args.scene_seed, camera=args.camera,
-                            image_size=(args.image_size, args.image_size),
-                            motion_noise=args.motion_noise,
-                            max_episode_steps=args.max_episode_steps, start=args.start,
-                            **city_options(source, args.allow_other_city))
-        city = env.unwrapped.city
-        for name in args.agents.split(","):
-            if name == "scripted":
-                agent = ScriptedAgent(city)
-            else:
-                policy = Path(args.policies) / source / "policy.pt"
-                if not policy.exists():
-                    print(f"skipping ppo on {source}: no {policy} (run appearance-nav train)")
-                    continue
-                agent = PPOAgent.load(policy, city)
+    runs = {}
+    for source in dict.fromkeys(source for _, source in pairs):
+        env = _make_env(args, source, localizer)
+        for name in [n for n, s in pairs if s == source]:
+            agent = _make_agent(args, name, source, env.unwrapped.city)
             t0 = time.perf_counter()
-            runs = run_episodes(env if log is None else RerunRecorder(
+            episodes = run_episodes(env if log is None else RerunRecorder(
                 env, log, f"{name}/{source}", args.rerun_episodes,
                 path=lambda agent=agent: getattr(agent, "path", None)),
                 agent, seeds, desc=f"{name} on {source}")
-            summary = {"agent": name, "source": source, **summarize(runs),
-                       "wall_seconds": round(time.perf_counter() - t0, 1)}
-            rows.append(summary)
-            episodes[f"{name}/{source}"] = as_records(runs)
-            print(agents_table([summary]).splitlines()[-1], flush=True)
+            runs[name, source] = (episodes, time.perf_counter() - t0)
+            print(agents_table([_summary(name, source, *runs[name, source])]).splitlines()[-1],
+                  flush=True)
         env.close()
     if log is not None:
         log.close()
         print(f"Rerun recording: {args.rerun} (open it with: rerun {args.rerun})")
+    return runs
+
+
+def _summary(name: str, source: str, episodes: list[Episode], seconds: float) -> dict:
+    return {"agent": name, "source": source, **summarize(episodes),
+            "wall_seconds": round(seconds, 1)}
+
+
+def evaluate_agents(args: EvalConfig) -> list[dict]:
+    """Run every agent on every pose source; write ``agents.md`` / ``agents.json`` to
+    ``args.out``; return one summary row per (agent, source).
+
+    Raises
+    ------
+    ValueError
+        If ``args.rerun`` is asked with ``workers > 1`` or a Ray address (a recording is
+        written by this process).
+    """
+    parallel = args.workers != 1 or bool(args.ray_address)
+    if parallel and args.rerun:
+        raise ValueError("rerun records the episodes in this process: use workers=1 and no "
+                         "ray_address with it")
+    pairs = _runs(args, args.sources.split(","))
+    runs = (_evaluate_parallel if parallel else _evaluate_serial)(args, pairs)
+    rows = [_summary(name, source, *runs[name, source]) for name, source in pairs]
+    episodes = {f"{name}/{source}": as_records(runs[name, source][0]) for name, source in pairs}
+    if parallel:
+        print("\n".join(agents_table(rows).splitlines()[2:]), flush=True)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     md = (f"# Navigation on the pose belief\n\nCity {args.scene_seed}, {args.camera} "
@@ -118,7 +230,9 @@ def evaluate_agents(args: EvalConfig) -> list[dict]:
           f"{args.episodes} episodes (reset seeds {args.seed}..), truncation at "
           f"{args.max_episode_steps} steps.\n\n{agents_table(rows)}\n")
     (out / "agents.md").write_text(md)
-    (out / "agents.json").write_text(json.dumps({"args": dataclasses.asdict(args), "rows": rows,
+    settings = {k: v for k, v in dataclasses.asdict(args).items()
+                if k not in ("workers", "ray_address")}
+    (out / "agents.json").write_text(json.dumps({"args": settings, "rows": rows,
                                                   "episodes": episodes}, indent=1))
     print(md)
     return rows
