@@ -47,7 +47,7 @@ def test_a_strongly_contradicted_ekf_restarts_where_the_particles_are(localizer,
     """The EKF (not the particles) thrown 6 m off, as a kidnap does to it: its NIS exceeds
     ``strong_nis`` and after ``strong_steps`` such steps it restarts at the particles."""
     W, poses, controls = features
-    pf = _belief(localizer, max_injection=0.0)
+    pf = _belief(localizer, max_injection=0.0, track_mode={"strong_steps": 3})
     pf.reset(W[0], x0=poses[0])
     pf.tracker.ekf.ekf.x = poses[0] + np.array([6.0, 0.0, 0.0])
     sources, statuses = [], []
