@@ -29,9 +29,8 @@ first or second step on. ``strong_steps`` trades the two: 3 steps gave kidnap re
 median 4 / p95 12 steps but a pooled nominal RMSE of 0.31 m; 5: 4 / 22, 0.25 m; 8 (the
 default): 7 / 24 (98 % within 30 steps), 0.127 m (the EKF: 0.088 m). The particles left
 the EKF's pose for at most 11 steps in a row on the first 6 nominal drives
-(``max_unsupported`` 20). A start
-from the image or a global start (no known pose) starts condemned: the report follows the
-particles until they agree.
+(``max_unsupported`` 20). A start from the image or a global start (no known pose) starts
+condemned: the report follows the particles until they agree.
 """
 
 from __future__ import annotations
