@@ -17,7 +17,9 @@ markdown table (``make bench`` runs them all).
   of the pose filters side by side (``<global-out-dir>/bench_global.json`` / ``.md``);
 - appearance: single-image and closed-loop localization under every conditions preset, for
   a localizer trained on daylight and one on randomised conditions
-  (``<appearance-out-dir>/bench_appearance.json`` / ``.md``).
+  (``<appearance-out-dir>/bench_appearance.json`` / ``.md``);
+- parallel: dataset collection on one process, on local worker processes and on Ray tasks,
+  side by side (``<parallel-out-dir>/bench_parallel.json`` / ``.md``).
 
 Each benchmark's own options are ``--<benchmark>-<option>`` (listed below); they are checked
 for every benchmark chosen by ``--only`` before the first one starts.
@@ -50,6 +52,7 @@ from localization.workflows.benchmarks.env import EnvBenchConfig
 from localization.workflows.benchmarks.filter import FilterBenchConfig
 from localization.workflows.benchmarks.global_loc import GlobalBenchConfig
 from localization.workflows.benchmarks.gse import GSEBenchConfig
+from localization.workflows.benchmarks.parallel import ParallelBenchConfig
 from localization.workflows.kidnap_eval import FILTERS
 from localization.workflows.sim import CONDITION_NAMES, LANE_SETS, NORMALIZATIONS
 from localization.workflows.training import VEC_ENVS
@@ -75,6 +78,8 @@ class Args:
         "help": "kidnapping, global start, look-alike city: the filters side by side"})
     appearance: AppearanceBenchConfig = field(default_factory=AppearanceBenchConfig, metadata={
         "help": "localization under lighting, weather, camera effects and traffic"})
+    parallel: ParallelBenchConfig = field(default_factory=ParallelBenchConfig, metadata={
+        "help": "collection on one process, local processes and Ray, side by side"})
 
 
 def _check_env_bench(c: EnvBenchConfig) -> None:
@@ -142,9 +147,16 @@ def _check_appearance_bench(c: AppearanceBenchConfig) -> None:
     check_output_dir("appearance_out_dir", c.out_dir)
 
 
+def _check_parallel_bench(c: ParallelBenchConfig) -> None:
+    check_choice("parallel_mode", c.mode, ("grid", "random", "lanes"))
+    check_numbers(c, positive=("n", "image_size", "workers", "rounds"),
+                  non_negative=("scene_seed", "seed"), prefix="parallel_")
+    check_output_dir("parallel_out_dir", c.out_dir)
+
+
 CHECKS = {"env": _check_env_bench, "gse": _check_gse_bench, "filter": _check_filter_bench,
           "agents": _check_agents_bench, "global": _check_global_bench,
-          "appearance": _check_appearance_bench}
+          "appearance": _check_appearance_bench, "parallel": _check_parallel_bench}
 
 
 def _config(args: Args, name: str) -> object:

@@ -9,7 +9,9 @@ in one run, each writing JSON and a markdown table.
   cost of every pose filter side by side;
 - :mod:`.appearance`: single-image and closed-loop localization under every conditions
   preset (lighting, weather, camera effects, moving things), for a localizer trained on the
-  default look and one trained on randomised conditions.
+  default look and one trained on randomised conditions;
+- :mod:`.parallel`: dataset collection on one process, on local worker processes and on Ray
+  tasks, side by side.
 
 :data:`BENCHMARKS` maps each name to its module, settings class and run function; modules
 load on first use.
@@ -31,6 +33,7 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "agents": ("agents", "AgentsBenchConfig", "run_agents_bench"),
     "global": ("global_loc", "GlobalBenchConfig", "run_global_bench"),
     "appearance": ("appearance", "AppearanceBenchConfig", "run_appearance_bench"),
+    "parallel": ("parallel", "ParallelBenchConfig", "run_parallel_bench"),
 }
 
 
