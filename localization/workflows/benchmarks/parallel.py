@@ -18,15 +18,16 @@ load from other processes hits all alike):
   started once before the rounds and timed apart: a cluster is already running). Skipped with
   a note when Ray is not installed.
 
-Reported: the median wall time of each, the CPU seconds of this process and its worker
-processes (not Ray's, which are not its children), samples/s, speed-up = median over rounds
-of serial time / parallel time, and whether the arrays of every run are identical to the
-serial ones. Target (PASS/MISS): speed-up >= 1.6 with 2 workers on 2 cores, for both.
+Reported: the median wall time of each, the CPU seconds of the collection tasks (summed
+over the workers; worker start-up not included) and the cores they used (task CPU / wall),
+samples/s, speed-up = median over rounds of serial time / parallel time, and whether the
+arrays of every run are identical to the serial ones. Target (PASS/MISS): speed-up >= 1.6
+with 2 workers on 2 cores, for both.
 
 On a shared machine the wall times measure the share of the CPU the benchmark gets: Linux
 schedules fairly between sessions (autogroups), not processes, so while other sessions keep
-the cores busy two workers get no more CPU than one process; the load averages are
-reported beside the table, and the CPU column shows the work itself.
+the cores busy two workers get no more CPU than one process ("cores used" ~1 for both); the
+load averages are reported beside the table.
 """
 
 from __future__ import annotations
@@ -36,7 +37,6 @@ import hashlib
 import importlib.util
 import json
 import os
-import resource
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -79,19 +79,12 @@ def _digest(images: np.ndarray, poses: np.ndarray) -> str:
     return hashlib.sha256(images.tobytes() + poses.tobytes()).hexdigest()
 
 
-def _cpu() -> float:
-    """CPU seconds of this process and its finished children (the worker processes)."""
-    own, children = (resource.getrusage(w) for w in (resource.RUSAGE_SELF,
-                                                      resource.RUSAGE_CHILDREN))
-    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
-
-
 def _timed(config: CollectConfig) -> tuple[float, float, str]:
-    """Wall seconds, CPU seconds (this process and its worker processes; Ray's workers are
-    not its children) and the digest of the arrays of one collection."""
-    t0, c0 = time.perf_counter(), _cpu()
-    images, poses, _ = collect_arrays(config, progress=False)
-    return time.perf_counter() - t0, _cpu() - c0, _digest(images, poses)
+    """Wall seconds, CPU seconds of the collection tasks (in whichever process they ran) and
+    the digest of the arrays of one collection."""
+    t0 = time.perf_counter()
+    images, poses, info = collect_arrays(config, progress=False)
+    return time.perf_counter() - t0, info["cpu_seconds"], _digest(images, poses)
 
 
 def _start_ray(workers: int) -> tuple[float | None, bool]:
@@ -126,19 +119,19 @@ def markdown(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
          f"{ray_start}). {meta['cpu_count']} CPUs, load average at start {meta['loadavg']}, "
          f"at end {meta['loadavg_end']}."),
         "",
-        ("| run | workers | wall (s) | CPU (s) | samples/s | speed-up | identical to serial | "
-         f">= {TARGET_SPEEDUP}x |"),
-        "|---|---:|---:|---:|---:|---:|---|---|",
+        ("| run | workers | wall (s) | task CPU (s) | cores used | samples/s | speed-up | "
+         f"identical to serial | >= {TARGET_SPEEDUP}x |"),
+        "|---|---:|---:|---:|---:|---:|---:|---|---|",
     ]
     for r in rows:
         if r["seconds"] is None:
-            lines.append(f"| {r['method']} | {r['workers']} | - | - | - | - | - | "
+            lines.append(f"| {r['method']} | {r['workers']} | - | - | - | - | - | - | "
                          f"skipped: {r['note']} |")
             continue
         target = "" if r["method"] == "serial" else \
             ("PASS" if r["speedup"] >= TARGET_SPEEDUP else "MISS")
-        cpu = "-" if r["cpu_seconds"] is None else f"{r['cpu_seconds']:.1f}"
-        lines.append(f"| {r['method']} | {r['workers']} | {r['seconds']:.1f} | {cpu} | "
+        lines.append(f"| {r['method']} | {r['workers']} | {r['seconds']:.1f} | "
+                     f"{r['cpu_seconds']:.1f} | {r['cpu_share']:.2f} | "
                      f"{r['samples_per_s']:.0f} | {r['speedup']:.2f} | "
                      f"{'yes' if r['identical'] else 'NO'} | {target} |")
     return "\n".join(lines) + "\n"
@@ -184,7 +177,8 @@ def run_parallel_bench(args: ParallelBenchConfig) -> list[dict[str, Any]]:
         rows.append({"method": m, "workers": workers, "seconds": float(np.median(t)),
                      "times": [round(v, 3) for v in t],
                      "samples_per_s": args.n / float(np.median(t)),
-                     "cpu_seconds": None if m == "ray" else float(np.median(cpu[m])),
+                     "cpu_seconds": float(np.median(cpu[m])),
+                     "cpu_share": float(np.median(np.array(cpu[m]) / t)),
                      "speedup": float(np.median(serial / t)),
                      "identical": digests[m] == digests["serial"] and len(digests[m]) == 1})
     table = markdown(rows, meta)
