@@ -13,14 +13,19 @@ true ``poses`` (n, 3) float64 ``[x, y, yaw]``:
   the robot is placed ``ROLL_STEPS`` steps before the pose at cruise speed and drives
   there, so the camera has the pitch and roll of a moving robot (a teleported robot
   stands level; a driving one pitches ~1 degree, which shifted a localizer trained on
-  level images by ~0.1 m along track).
+  level images by ~0.1 m along track);
+- ``"coverage"``: poses over the whole street surface at every heading
+  (:func:`envs.coverage.coverage_poses`: off the lanes too, intersections weighted up,
+  stratified headings), each reached driving like "lanes" but with a random control of an
+  off-lane drive (forward speed up to cruise speed, any turn rate, turning on the spot
+  included).
 
 For "grid" and "random" the robot is teleported (``mj_forward``) and the camera
 rendered, which is fast.
 
 :func:`drive_route` records a drive around the route with its controls (for the process
 noise and the measurement noise of a filter), :func:`drive_streets` one along a random tour
-of all the streets.
+of all the streets, :func:`drive_off_lane` one that leaves the lanes (:mod:`envs.off_lane`).
 
 :func:`save_dataset` / :func:`load_dataset` (the ``.npz`` format) are defined in
 :mod:`localization.recorded`, next to the readers of recorded image folders, and re-exported
@@ -38,9 +43,11 @@ import numpy as np
 from numpy.typing import NDArray
 from tqdm.auto import tqdm
 
+from envs.coverage import coverage_poses
 from envs.driving import bearing, pursuit_turn_rate
 from envs.lanes import lane_poses, street_tour
 from envs.motion_model import wrap_angle
+from envs.off_lane import OffLanePilot, off_lane_waypoints
 from envs.robot import HALF_TRACK, ROBOT_RADIUS, WHEEL_RADIUS
 from localization._validation import (
     check_bool,
@@ -52,12 +59,14 @@ from localization._validation import (
 )
 from localization.recorded import load_dataset, save_dataset  # the .npz format, one definition
 
-__all__ = ["MODES", "PurePursuit", "collect_dataset", "drive_route", "drive_streets", "grid_poses",
-           "load_dataset", "save_dataset", "slice_seed"]
+__all__ = ["MODES", "PurePursuit", "collect_dataset", "drive_off_lane", "drive_route",
+           "drive_streets", "grid_poses", "load_dataset", "save_dataset", "slice_seed"]
 
-MODES = ("grid", "random", "route", "lanes")
+MODES = ("grid", "random", "route", "lanes", "coverage")
 #: the keyword arguments of :func:`envs.lanes.lane_poses` that ``collect_dataset`` passes on
 LANE_OPTIONS = ("lanes", "lateral", "heading", "turn_radius", "turn_weight")
+#: the keyword arguments of :func:`envs.coverage.coverage_poses` that it passes on
+COVERAGE_OPTIONS = ("region", "corner_weight", "corner_reach")
 POSE_MARGIN = ROBOT_RADIUS + 0.1  # m of clearance to buildings for teleported poses
 ROLL_STEPS = 3  # env steps driven into each "lanes" pose
 CRUISE_SPEED = 0.6  # m/s, PurePursuit's default speed
@@ -144,7 +153,12 @@ def _drive_into(base: Any, pose: NDArray[np.float64], curvature: float, steps: i
     (body and wheels moving), drive ``[v, v * curvature]`` into ``pose``; image and true pose.
     ``placed()`` (optional) runs once the robot is at its start (a new look, its traffic
     spawned away from the robot there)."""
-    v, w = CRUISE_SPEED, CRUISE_SPEED * curvature
+    return _drive_in(base, pose, CRUISE_SPEED, CRUISE_SPEED * curvature, steps, placed)
+
+
+def _drive_in(base: Any, pose: NDArray[np.float64], v: float, w: float, steps: int,
+              placed: Any = None) -> tuple[NDArray[np.uint8], NDArray[np.float64]]:
+    """:func:`_drive_into` with the control ``[v, w]`` (``v = 0``: turning on the spot)."""
     back = steps * base.dt
     yaw0 = pose[2] - w * back
     if abs(w) > 1e-9:
@@ -192,9 +206,9 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
     n_headings : int — headings per grid position ("grid" only).
     progress : bool — show a tqdm progress bar.
     start, stop : int — collect only samples ``start .. stop - 1`` (default all n) of the
-        n-sample dataset ("grid", "random", "lanes"; "route" is one drive: all of it). The
-        poses are those of the whole dataset. The per-sample randomness (the looks of
-        randomised conditions, the motion noise of the "lanes" drive-in) restarts at
+        n-sample dataset ("grid", "random", "lanes", "coverage"; "route" is one drive: all
+        of it). The poses are those of the whole dataset. The per-sample randomness (the
+        looks of randomised conditions, the motion noise of the drive-in) restarts at
         ``start`` from the env reset with :func:`slice_seed` ``(seed, start)``. Slices of
         "grid" and "random" without that randomness equal the whole run's exactly; "lanes"
         slices equal it in the images and within rounding (~1e-15) in the poses (the wheels'
@@ -202,8 +216,9 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
         samples (``appearance-nav collect --workers`` collects in fixed slices).
     **lane_options : keyword arguments of :func:`envs.lanes.lane_poses` ("lanes" only):
         ``lanes`` ("streets" or "route"), ``lateral``, ``heading``, ``turn_radius``,
-        ``turn_weight``. The poses returned are the true poses reached (within a few mm of
-        the sampled ones).
+        ``turn_weight``; or of :func:`envs.coverage.coverage_poses` ("coverage" only):
+        ``region`` ("streets" or "free"), ``corner_weight``, ``corner_reach``. The poses
+        returned are the true poses reached (within a few mm of the sampled ones).
 
     The env's state is changed (teleports, or a reset and a drive for "route"): reset it
     before running episodes on it. An env made with randomised conditions
@@ -222,8 +237,11 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
     seed = check_seed(seed, "seed")
     n_headings = check_int(n_headings, "n_headings", low=1)
     check_bool(progress, "progress")
-    check_options(lane_options, "lane option", LANE_OPTIONS)
-    if lane_options and mode != "lanes":
+    if mode == "coverage":
+        check_options(lane_options, "coverage option", COVERAGE_OPTIONS)
+    else:
+        check_options(lane_options, "lane option", LANE_OPTIONS)
+    if lane_options and mode not in ("lanes", "coverage"):
         raise ValueError(f"lane options {sorted(lane_options)} apply to mode 'lanes' only")
     start, stop = _check_slice(start, stop, n, mode)
     stream = slice_seed(seed, start)
@@ -250,6 +268,15 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
         base.reset(seed=stream)  # seeds the motion noise of the drive-in
         for i, (target, k) in enumerate(zip(targets[start:stop], curvature[start:stop])):
             images[i], poses[i] = _drive_into(base, target, k, ROLL_STEPS, redraw)
+            bar.update()
+    elif mode == "coverage":
+        rng = np.random.default_rng(seed)
+        targets = coverage_poses(city, n, rng, margin=POSE_MARGIN, **lane_options)
+        controls = np.column_stack([rng.uniform(0.0, CRUISE_SPEED, n),
+                                    rng.uniform(-base.W_MAX, base.W_MAX, n)])
+        base.reset(seed=stream)  # seeds the motion noise of the drive-in
+        for i, (target, (v, w)) in enumerate(zip(targets[start:stop], controls[start:stop])):
+            images[i], poses[i] = _drive_in(base, target, v, w, ROLL_STEPS, redraw)
             bar.update()
     else:
         if mode == "grid":
@@ -328,13 +355,37 @@ def drive_streets(env: gym.Env, n: int, seed: int = 0, speed: float = CRUISE_SPE
     return _drive(env, pilot, pilot.start_pose(0), n, seed, progress, "drive streets")
 
 
+def drive_off_lane(env: gym.Env, n: int, seed: int = 0, speed: float = CRUISE_SPEED,
+                   progress: bool = True,
+                   ) -> tuple[NDArray[np.uint8], NDArray[np.float64], NDArray[np.float64]]:
+    """Drive n steps off the lanes (:func:`envs.off_lane.off_lane_waypoints` drawn from
+    ``seed``: weaving across the streets, U-turns, turning on the spot at corners) with
+    :class:`envs.off_lane.OffLanePilot` on the true pose, from the first waypoint at a random
+    heading. Arguments and returns as :func:`drive_route`."""
+    base = check_city_env(env)
+    _check_drive(n, seed, progress)
+    speed = check_real(speed, "speed", low=0.0, low_open=True)
+    pilot, start = off_lane_pilot(base, n, seed, speed)
+    return _drive(env, pilot, start, n, seed, progress, "drive off lane")
+
+
+def off_lane_pilot(base: Any, n: int, seed: int, speed: float = CRUISE_SPEED,
+                   ) -> tuple[OffLanePilot, NDArray[np.float64]]:
+    """The pilot of an n-step off-lane drive drawn from ``seed`` on the env ``base``'s city,
+    and its start pose (3,)."""
+    rng = np.random.default_rng(seed)
+    waypoints = off_lane_waypoints(base.city, n * base.dt * speed + 10.0, rng, margin=POSE_MARGIN)
+    pilot = OffLanePilot(waypoints, speed=speed, w_max=base.W_MAX)
+    return pilot, pilot.start_pose(rng)
+
+
 def _check_drive(n: object, seed: object, progress: object) -> None:
     check_int(n, "n", low=1)
     check_seed(seed, "seed")
     check_bool(progress, "progress")
 
 
-def _drive(env: gym.Env, pilot: PurePursuit, start: NDArray[np.float64], n: int, seed: int,
+def _drive(env: gym.Env, pilot: PurePursuit | OffLanePilot, start: NDArray[np.float64], n: int, seed: int,
            progress: bool, desc: str,
            ) -> tuple[NDArray[np.uint8], NDArray[np.float64], NDArray[np.float64]]:
     base = env.unwrapped

@@ -52,6 +52,7 @@ from sklearn.neighbors import NearestNeighbors
 
 from localization.filtering._modes import Mode, find_modes
 from localization.filtering.measurement_noise import inflate
+from localization.filtering.mode_tracker import ModeTracker
 from localization.filtering.particle_motion import (
     is_unicycle,
     predict_particles,
@@ -66,12 +67,27 @@ RESET_MODES = ("image", "global")
 #: "initial" after reset; "out_of_domain": the image has no measurement (weights kept);
 #: "lost": w_fast < lost_ratio w_slow (the images are far less likely than usual);
 #: "doubtful": this image alone is far less likely than usual (w_avg < doubt_ratio w_slow:
-#: an outlier frame, or the first sign of a kidnap);
+#: an outlier frame, or the first sign of a kidnap), or (``track_mode``) the reported EKF
+#: holds its pose against most particles;
 #: "relocalizing": particles injected this step; "ambiguous": the dominant mode holds less
 #: than ``confident_weight``; "tracking": otherwise.
 PARTICLE_STATUSES = ("initial", "tracking", "ambiguous", "doubtful", "relocalizing", "lost",
                      "out_of_domain")
 SampleFree = Callable[[int, np.random.Generator], ArrayLike]
+
+
+def _tracker(track_mode: bool | dict[str, Any], localizer: Any, motion_model: Any,
+             measurement: str, alpha: Array, radius: float, heading_scale: float,
+             confident_weight: float) -> ModeTracker | None:
+    if isinstance(track_mode, dict):
+        return ModeTracker(localizer, motion_model, measurement, **{
+            "alpha": alpha, "radius": radius, "heading_scale": heading_scale,
+            "confident_weight": confident_weight, **track_mode})
+    if not isinstance(track_mode, bool):
+        raise TypeError(f"track_mode must be a bool or a dict of ModeTracker settings, got "
+                        f"{track_mode!r}")
+    return _tracker({}, localizer, motion_model, measurement, alpha, radius, heading_scale,
+                    confident_weight) if track_mode else None
 
 
 def _fraction(name: str, value: float, low_open: bool = False) -> float:
@@ -136,6 +152,7 @@ class ParticleBelief:
                  lost_ratio: float = 0.2, doubt_ratio: float = 0.02,
                  confident_weight: float = 0.8,
                  mode_radius: float = 1.0, heading_scale: float = 2.0,
+                 track_mode: bool | dict[str, Any] = True,
                  seed: int | None = None) -> None:
         if measurement not in MEASUREMENTS:
             raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
@@ -192,6 +209,8 @@ class ParticleBelief:
         self._retrieval = NearestNeighbors(n_neighbors=min(int(n_neighbors), len(reg.theta_)))
         self._retrieval.fit(reg.gse_.Z_[:, :self._m])  # standardised training features
         self.rng = np.random.default_rng(seed)
+        self.tracker = _tracker(track_mode, localizer, motion_model, measurement, self.alpha,
+                                self.mode_radius, self.heading_scale, self.confident_weight)
         self.particles: Array | None = None
         self.log_weights: Array | None = None
         self.w_slow = self.w_fast = np.nan
@@ -214,15 +233,15 @@ class ParticleBelief:
 
     @property
     def pose_mean(self) -> Array:
-        """Mean (3,) of the dominant mode."""
+        """Mean (3,) of the dominant mode (its EKF's with ``track_mode``)."""
         self._check()
-        return self.modes[0].mean.copy()
+        return self.modes[0].mean.copy() if self.tracker is None else self.tracker.mean
 
     @property
     def pose_cov(self) -> Array:
         """Covariance (3, 3) of the dominant mode (heading residuals wrapped)."""
         self._check()
-        return self.modes[0].cov.copy()
+        return self.modes[0].cov.copy() if self.tracker is None else self.tracker.cov
 
     x, P = pose_mean, pose_cov  # BeliefFilter's names
 
@@ -307,6 +326,8 @@ class ParticleBelief:
             n_prop = round(self.global_proposal_fraction * N)
             X = np.vstack([self._jitter(self.proposals(w), n_prop), self._free(N - n_prop)])
         self._set(X)
+        if self.tracker is not None:
+            self.tracker.reset(w, self.modes[0], known=x0 is not None)
         self.w_slow = self.w_fast = np.nan
         self.status, self.injected = "initial", 0
         self._fresh = np.zeros(self.n_particles, dtype=bool)
@@ -364,6 +385,7 @@ class ParticleBelief:
         if not np.all(np.isfinite(z)):
             self._set(self.particles, self.log_weights)
             self.status = "out_of_domain"
+            self._track(u, w)
             return np.nan, self.status
         log_L = -0.5 * np.minimum(np.nan_to_num(self.distances(w, z=z), nan=np.inf), self.gate)
         old = self.log_weights[~self._fresh] if (~self._fresh).any() else self.log_weights
@@ -385,7 +407,17 @@ class ParticleBelief:
             self._fresh[:] = False
         self.injected = n_inject
         self.status = self._status(w_avg)
+        self._track(u, w)
         return w_avg, self.status
+
+    def _track(self, u: ArrayLike, w: Array) -> None:
+        """Step the mode tracker; a report most particles disagree with is "doubtful"."""
+        if self.tracker is None:
+            return
+        source = self.tracker.step(u, w, self.particles, self.weights, self.modes[0])
+        unsupported = source == "ekf" and self.tracker.support < self.tracker.support_weight
+        if unsupported and self.status == "tracking":
+            self.status = "doubtful"
 
     def _resample(self, log_w: Array, n_inject: int, w: Array) -> None:
         """Resample by ``self.resample`` and replace ``n_inject`` random particles by

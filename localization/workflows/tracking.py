@@ -10,12 +10,16 @@ benchmark (:mod:`.benchmarks.filter`) and the tests.
   on that belief (closed loop, "representation" model) on which the calibration is refined:
   in closed loop the robot follows the belief's errors, which the true-pose drive does not
   show. The drives go where the training lanes go: around the route (``lanes="route"``) or
-  along random tours of all the streets, both ways (``lanes="streets"``). The localizer
+  along random tours of all the streets, both ways (``lanes="streets"``); or, with
+  ``lanes="free"``, the images cover the whole street surface at every heading
+  (``collect_dataset(mode="coverage")``, :mod:`envs.coverage`) and the drives leave the lanes
+  (:func:`envs.datasets.drive_off_lane`: weaving, U-turns, turning on the spot). The localizer
   records its city (``city_``, :func:`~localization.localizer.city_info`) and, from one more
   held-out drive, its quality report ``quality_`` (:mod:`.quality`), with a
   :class:`~localization.workflows.quality.LocalizerQualityWarning` when it is poor.
-- :func:`track_route` / :func:`track_streets`: drive ``steps`` steps along the route / a
-  random street tour with a pure-pursuit controller on the belief mean
+- :func:`track_route` / :func:`track_streets` / :func:`track_off_lane`: drive ``steps`` steps
+  along the route / a random street tour / an off-lane drive (:mod:`envs.off_lane`) with a
+  controller on the belief mean
   (:class:`~localization.wrappers.BeliefWrapper`), and dead-reckon the same commanded
   controls from the true start pose (F alone). They refuse a localizer of another city
   unless ``allow_other_city=True``.
@@ -35,12 +39,24 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
-from envs.datasets import PurePursuit, collect_dataset, drive_route, drive_streets
+from envs.datasets import (
+    PurePursuit,
+    collect_dataset,
+    drive_off_lane,
+    drive_route,
+    drive_streets,
+    off_lane_pilot,
+)
 from envs.lanes import street_tour
+from envs.off_lane import OffLanePilot
 from localization.geometry import Array, wrap_angle
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer, city_info
 from localization.workflows.quality import quality_report, warn_quality
 from localization.wrappers import BeliefWrapper
+
+#: training sets of :func:`fit_city_localizer`: the route's lanes, every street's, or the
+#: whole street surface at every heading
+TRAININGS = ("route", "streets", "free")
 
 
 @dataclass
@@ -76,19 +92,21 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
     ----------
     env : an AppearanceNav env (its motion noise is the one the noise model learns).
     n_train : int
-        Training images around the lanes.
-    lanes : {"route", "streets"}
-        Lanes of the training images (see :mod:`envs.lanes`).
+        Training images around the lanes (or over the street surface).
+    lanes : {"route", "streets", "free"}
+        Lanes of the training images (see :mod:`envs.lanes`), or "free": the whole street
+        surface at every heading (:mod:`envs.coverage`).
     n_drive : int
         Steps of each noise drive (around the route for ``lanes="route"``, along random
-        street tours for ``lanes="streets"``).
+        street tours for ``lanes="streets"``, off-lane drives for ``lanes="free"``).
     seed : int
         Seeds the training poses and the drives (drive seeds ``seed + 1``, ``seed + 2``).
     localizer_params : dict, optional
         Keyword arguments of :class:`AppearanceLocalizer` (default ``noise_folds=0``: R comes
         from the drives).
     lane_options : dict, optional
-        Extra options of the "lanes" dataset (``lateral``, ``heading``, ...).
+        Extra options of the "lanes" dataset (``lateral``, ``heading``, ...), or for
+        ``lanes="free"`` of the "coverage" one (``region``, ``corner_weight``, ...).
     calibrate_on_belief : bool
         After calibrating the consistency on the true-pose drive, refine it on a drive on
         that belief (closed loop, "representation" model).
@@ -117,13 +135,19 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
     steps = n_drive if quality_steps is None else int(quality_steps)
     if steps < 0:
         raise ValueError(f"quality_steps must be >= 0 or None, got {quality_steps}")
+    _check_training(lanes)
     seconds = {}
     t0 = time.perf_counter()
-    images, poses = collect_dataset(env, n_train, "lanes", seed=seed, progress=progress,
-                                    lanes=lanes, **(lane_options or {}))
+    loc = AppearanceLocalizer(**{"noise_folds": 0, **(localizer_params or {})})
+    if lanes == "free":
+        images, poses = collect_dataset(env, n_train, "coverage", seed=seed, progress=progress,
+                                        **(lane_options or {}))
+        images, poses = distinct_views(loc, images, poses)
+    else:
+        images, poses = collect_dataset(env, n_train, "lanes", seed=seed, progress=progress,
+                                        lanes=lanes, **(lane_options or {}))
     seconds["collect"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    loc = AppearanceLocalizer(**{"noise_folds": 0, **(localizer_params or {})})
     loc.fit(images, poses, camera=getattr(env.unwrapped, "camera_name", None),
             city=city_info(env))
     seconds["fit"] = time.perf_counter() - t0
@@ -134,12 +158,28 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
     metrics = None
     if steps > 0:
         model = "representation" if "representation" in measurements else measurements[0]
-        track = track_streets if lanes == "streets" else track_route
+        track = TRACKS[lanes]
         metrics = track_metrics(track(env, loc, model, steps, seed=seed + 3))
     loc.quality_ = quality_report(metrics, loc.consistency_)
     seconds["quality"] = time.perf_counter() - t0
     warn_quality(loc.quality_)
     return loc, seconds
+
+
+def distinct_views(localizer: AppearanceLocalizer, images: NDArray[np.uint8], poses: Array
+                   ) -> tuple[NDArray[np.uint8], Array]:
+    """Drop every image whose rows seen by ``localizer`` (its ``rows``) are identical to
+    another's: (images (n', H, W, 3), poses (n', 3)).
+
+    At every heading some coverage poses face a building wall from a few decimetres: the
+    view is one flat colour, the same at many poses, and identical samples stop GSE's graph
+    (2 of 20000 at 64 x 64 on city 12). No pose can be read from such a view, so all its
+    copies go.
+    """
+    flat = localizer._crop(images).reshape(len(images), -1)
+    _, inverse, counts = np.unique(flat, axis=0, return_inverse=True, return_counts=True)
+    keep = counts[inverse.ravel()] == 1
+    return images[keep], poses[keep]
 
 
 def fit_city_noise(env: gym.Env, localizer: AppearanceLocalizer, lanes: str = "route",
@@ -149,11 +189,9 @@ def fit_city_noise(env: gym.Env, localizer: AppearanceLocalizer, lanes: str = "r
     """The noise stage of :func:`fit_city_localizer` for a fitted localizer (same arguments):
     noise from a drive on the true pose (seed ``seed + 1``), consistency calibrated on it
     and then on a drive on the belief (seed ``seed + 2``)."""
-    if lanes not in ("route", "streets"):
-        raise ValueError(f"unknown lanes {lanes!r}; choose 'route' or 'streets'")
+    _check_training(lanes)
     motion_model = env.unwrapped.motion_model
-    streets = lanes == "streets"
-    drive = drive_streets if streets else drive_route
+    drive = {"route": drive_route, "streets": drive_streets, "free": drive_off_lane}[lanes]
     images, poses, controls = drive(env, n_drive, seed=seed + 1, progress=progress)
     try:
         localizer.fit_noise(motion_model, images, poses, controls)
@@ -163,8 +201,7 @@ def fit_city_noise(env: gym.Env, localizer: AppearanceLocalizer, lanes: str = "r
                          "(features_params n_components)") from err
     localizer.calibrate(motion_model, images, poses, controls, measurements)
     if calibrate_on_belief:
-        track = track_streets if streets else track_route
-        run = track(env, localizer, "representation", n_drive, seed=seed + 2, keep_images=True)
+        run = TRACKS[lanes](env, localizer, "representation", n_drive, seed=seed + 2, keep_images=True)
         localizer.calibrate(motion_model, run.images, run.true, run.controls, measurements)
     return localizer
 
@@ -204,7 +241,31 @@ def track_streets(env: gym.Env, localizer: AppearanceLocalizer, measurement: str
                   keep_images, allow_other_city, wrapper_options)
 
 
-def _track(env: gym.Env, localizer: AppearanceLocalizer, measurement: str, pilot: PurePursuit,
+def track_off_lane(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
+                   steps: int, seed: int = 0, keep_images: bool = False,
+                   speed: float = 0.6, allow_other_city: bool = False,
+                   **wrapper_options: Any) -> TrackResult:
+    """Drive ``steps`` steps off the lanes (:func:`envs.off_lane.off_lane_waypoints` drawn from
+    ``seed``: weaving across the streets, U-turns, turning on the spot at corners) with
+    :class:`envs.off_lane.OffLanePilot` on the belief mean, from the first waypoint at a
+    random heading (other arguments as :func:`track_route`)."""
+    pilot, start = off_lane_pilot(env.unwrapped, steps, seed, speed)
+    return _track(env, localizer, measurement, pilot, start, steps, seed,
+                  keep_images, allow_other_city, wrapper_options)
+
+
+#: the closed-loop drive of each training set
+TRACKS: dict[str, Callable[..., TrackResult]] = {
+    "route": track_route, "streets": track_streets, "free": track_off_lane}
+
+
+def _check_training(lanes: object) -> None:
+    if lanes not in TRAININGS:
+        raise ValueError(f"unknown lanes {lanes!r}; choose one of {TRAININGS}")
+
+
+def _track(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
+           pilot: PurePursuit | OffLanePilot,
            start: Array, steps: int, seed: int, keep_images: bool, allow_other_city: bool,
            wrapper_options: dict[str, Any],
            recorder: Callable[[gym.Env], gym.Env] | None = None) -> TrackResult:

@@ -10,6 +10,8 @@ in one run, each writing JSON and a markdown table.
 - :mod:`.appearance`: single-image and closed-loop localization under every conditions
   preset (lighting, weather, camera effects, moving things), for a localizer trained on the
   default look and one trained on randomised conditions;
+- :mod:`.coverage`: single-image and closed-loop localization anywhere on the street surface
+  at any heading (coverage training, off-lane drives) against KNR and retrieval;
 - :mod:`.parallel`: dataset collection on one process, on local worker processes and on Ray
   tasks, side by side.
 
@@ -33,6 +35,7 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "agents": ("agents", "AgentsBenchConfig", "run_agents_bench"),
     "global": ("global_loc", "GlobalBenchConfig", "run_global_bench"),
     "appearance": ("appearance", "AppearanceBenchConfig", "run_appearance_bench"),
+    "coverage": ("coverage", "CoverageBenchConfig", "run_coverage_bench"),
     "parallel": ("parallel", "ParallelBenchConfig", "run_parallel_bench"),
 }
 

@@ -56,7 +56,8 @@ METHODS = ("serial", "processes", "ray")
 class ParallelBenchConfig:
     """Settings of the scale-out benchmark."""
 
-    mode: str = field(default="random", metadata={"help": "collection mode (grid, random, lanes)"})
+    mode: str = field(default="random", metadata={
+        "help": "collection mode (any but route, which is one task)"})
     n: int = field(default=20000, metadata={"help": "samples collected by each run"})
     image_size: int = field(default=64, metadata={"help": "side of the square camera image"})
     workers: int = field(default=2, metadata={"help": "worker processes / Ray tasks in flight"})

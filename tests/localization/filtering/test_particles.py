@@ -119,9 +119,10 @@ def test_dominant_mode_summary_of_two_modes_is_the_heavier_one(localizer, featur
     assert modes[0].weight == pytest.approx(0.7, abs=0.02)
     assert modes[1].weight == pytest.approx(0.3, abs=0.02)
     assert np.sqrt(modes[0].cov[0, 0]) < 0.3  # not the spread of both modes (3 m)
-    # through the filter: weights, not counts, decide which mode dominates
+    # through the filter: weights, not counts, decide which mode dominates (the particles'
+    # own summary: track_mode's EKF would hold its hypothesis, test_mode_tracker.py)
     W = features[0]
-    pf = _belief(localizer, n_particles=len(X))
+    pf = _belief(localizer, n_particles=len(X), track_mode=False)
     pf.reset(W[0])
     pf._set(X, np.log(np.where(np.arange(len(X)) < 700, 0.2, 1.0)))
     np.testing.assert_allclose(pf.pose_mean, b, atol=0.05)

@@ -89,10 +89,11 @@ def test_serial_collection_is_unchanged_by_the_slices(mode: str, small_chunks: N
     assert meta["cpu_seconds"] > 0
 
 
-def test_lanes_slices_match_the_whole_drive_in(small_chunks: None) -> None:
-    """The lanes drive-in from a slice's start: the same images; the poses within rounding (the
+@pytest.mark.parametrize("mode", ["lanes", "coverage"])
+def test_drive_in_slices_match_the_whole_drive_in(mode: str, small_chunks: None) -> None:
+    """The drive-in from a slice's start: the same images; the poses within rounding (the
     wheels' joint angles carry over from one drive-in to the next in the whole run)."""
-    c = _config(mode="lanes")
+    c = _config(mode=mode)
     images, poses, _ = collect_arrays(c, progress=False)
     whole_images, whole_poses = _whole(c)
     np.testing.assert_array_equal(images, whole_images)
