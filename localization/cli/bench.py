@@ -19,7 +19,9 @@ markdown table (``make bench`` runs them all).
   a localizer trained on daylight and one on randomised conditions
   (``<appearance-out-dir>/bench_appearance.json`` / ``.md``);
 - coverage: single-image and closed-loop localization anywhere on the street surface at any
-  heading, GSE against KNR and retrieval (``<coverage-out-dir>/bench_coverage.json`` / ``.md``).
+  heading, GSE against KNR and retrieval (``<coverage-out-dir>/bench_coverage.json`` / ``.md``);
+- parallel: dataset collection on one process, on local worker processes and on Ray tasks,
+  side by side (``<parallel-out-dir>/bench_parallel.json`` / ``.md``).
 
 Each benchmark's own options are ``--<benchmark>-<option>`` (listed below); they are checked
 for every benchmark chosen by ``--only`` before the first one starts.
@@ -53,8 +55,9 @@ from localization.workflows.benchmarks.env import EnvBenchConfig
 from localization.workflows.benchmarks.filter import FilterBenchConfig
 from localization.workflows.benchmarks.global_loc import GlobalBenchConfig
 from localization.workflows.benchmarks.gse import GSEBenchConfig
+from localization.workflows.benchmarks.parallel import ParallelBenchConfig
 from localization.workflows.kidnap_eval import FILTERS
-from localization.workflows.sim import CAMERAS, CONDITION_NAMES, LANE_SETS, NORMALIZATIONS
+from localization.workflows.sim import CAMERAS, CONDITION_NAMES, LANE_SETS, MODES, NORMALIZATIONS
 from localization.workflows.training import VEC_ENVS
 
 __all__ = ["Args", "check", "run"]
@@ -80,6 +83,8 @@ class Args:
         "help": "localization under lighting, weather, camera effects and traffic"})
     coverage: CoverageBenchConfig = field(default_factory=CoverageBenchConfig, metadata={
         "help": "localization anywhere on the streets at any heading, off-lane drives"})
+    parallel: ParallelBenchConfig = field(default_factory=ParallelBenchConfig, metadata={
+        "help": "collection on one process, local processes and Ray, side by side"})
 
 
 def _check_env_bench(c: EnvBenchConfig) -> None:
@@ -156,9 +161,17 @@ def _check_coverage_bench(c: CoverageBenchConfig) -> None:
     check_output_dir("coverage_out_dir", c.out_dir)
 
 
+def _check_parallel_bench(c: ParallelBenchConfig) -> None:
+    check_choice("parallel_mode", c.mode, [m for m in MODES if m != "route"])
+    check_numbers(c, positive=("n", "image_size", "workers", "rounds"),
+                  non_negative=("scene_seed", "seed"), prefix="parallel_")
+    check_output_dir("parallel_out_dir", c.out_dir)
+
+
 CHECKS = {"env": _check_env_bench, "gse": _check_gse_bench, "filter": _check_filter_bench,
           "agents": _check_agents_bench, "global": _check_global_bench,
-          "appearance": _check_appearance_bench, "coverage": _check_coverage_bench}
+          "appearance": _check_appearance_bench, "coverage": _check_coverage_bench,
+          "parallel": _check_parallel_bench}
 
 
 def _config(args: Args, name: str) -> object:

@@ -104,12 +104,13 @@ def close_envs() -> None:
 def collect_slice(task: CollectTask,
                   ) -> tuple[NDArray[np.uint8], NDArray[np.float64], dict[str, float]]:
     """Samples ``task.start .. task.stop - 1``: images (m, H, W, 3) uint8, poses (m, 3)
-    float64, and the env's ``dt`` and ``city_size``."""
-    c = task.config
+    float64, and the env's ``dt`` and ``city_size`` with the slice's ``cpu_seconds``."""
+    c, cpu = task.config, time.process_time()
     env = _env(c)
     images, poses = envs.collect_dataset(env, c.n, c.mode, seed=c.seed, n_headings=c.n_headings,
                                          progress=False, start=task.start, stop=task.stop)
-    return images, poses, {"dt": env.unwrapped.dt, "city_size": env.unwrapped.city.size}
+    return images, poses, {"dt": env.unwrapped.dt, "city_size": env.unwrapped.city.size,
+                           "cpu_seconds": time.process_time() - cpu}
 
 
 def collect_tasks(args: CollectConfig) -> list[CollectTask]:
@@ -126,7 +127,8 @@ def collect_arrays(args: CollectConfig, progress: bool = True,
     -------
     images : (n, H, W, 3) uint8
     poses : (n, 3) float64 ``[x, y, yaw]``
-    env_meta : dict — ``dt`` and ``city_size`` of the env.
+    info : dict — ``dt`` and ``city_size`` of the env, and ``cpu_seconds``: the CPU time of
+        the slices (the env builds included, the worker start-up not).
     """
     tasks = collect_tasks(args)
     try:
@@ -135,18 +137,19 @@ def collect_arrays(args: CollectConfig, progress: bool = True,
                           desc=f"collect {args.mode} ({len(tasks)} slices)")
     finally:
         close_envs()  # the serial run's
-    return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
-            parts[0][2])
+    info = {**parts[0][2], "cpu_seconds": sum(p[2]["cpu_seconds"] for p in parts)}
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]), info
 
 
 def collect_to_file(args: CollectConfig) -> Path:
     """Collect ``args.n`` images and poses (progress bar) and save them; returns the file."""
     out = collect_out_path(args)
     t0 = time.perf_counter()
-    images, poses, env_meta = collect_arrays(args)
+    images, poses, info = collect_arrays(args)
     seconds = time.perf_counter() - t0
     settings = {k: v for k, v in dataclasses.asdict(args).items() if k not in RUN_OPTIONS}
-    path = envs.save_dataset(out, images, poses, **settings, **env_meta,
+    path = envs.save_dataset(out, images, poses, **settings, dt=info["dt"],
+                             city_size=info["city_size"],
                              chunk=CHUNK if args.mode != "route" else args.n)
     print(f"wrote {path}: images {images.shape}, poses {poses.shape} in {seconds:.1f} s "
           f"({args.n / seconds:.0f} samples/s, {args.workers} worker(s)"

@@ -11,7 +11,9 @@ in one run, each writing JSON and a markdown table.
   preset (lighting, weather, camera effects, moving things), for a localizer trained on the
   default look and one trained on randomised conditions;
 - :mod:`.coverage`: single-image and closed-loop localization anywhere on the street surface
-  at any heading (coverage training, off-lane drives) against KNR and retrieval.
+  at any heading (coverage training, off-lane drives) against KNR and retrieval;
+- :mod:`.parallel`: dataset collection on one process, on local worker processes and on Ray
+  tasks, side by side.
 
 :data:`BENCHMARKS` maps each name to its module, settings class and run function; modules
 load on first use.
@@ -34,6 +36,7 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "global": ("global_loc", "GlobalBenchConfig", "run_global_bench"),
     "appearance": ("appearance", "AppearanceBenchConfig", "run_appearance_bench"),
     "coverage": ("coverage", "CoverageBenchConfig", "run_coverage_bench"),
+    "parallel": ("parallel", "ParallelBenchConfig", "run_parallel_bench"),
 }
 
 

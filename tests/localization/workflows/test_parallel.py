@@ -84,7 +84,9 @@ def test_serial_collection_is_unchanged_by_the_slices(mode: str, small_chunks: N
     whole_images, whole_poses = _whole(c)
     np.testing.assert_array_equal(images, whole_images)
     np.testing.assert_array_equal(poses, whole_poses)
-    assert meta == {"dt": pytest.approx(0.1), "city_size": pytest.approx(20.0)}
+    assert meta == {"dt": pytest.approx(0.1), "city_size": pytest.approx(20.0),
+                    "cpu_seconds": pytest.approx(meta["cpu_seconds"])}
+    assert meta["cpu_seconds"] > 0
 
 
 @pytest.mark.parametrize("mode", ["lanes", "coverage"])
@@ -199,3 +201,22 @@ def test_eval_sweep_on_processes_and_ray_equals_the_serial_one(tmp_path: object,
 def test_eval_rerun_with_workers_is_refused(tmp_path: object) -> None:
     with pytest.raises(ValueError, match="rerun"):
         _eval(tmp_path, "x", workers=2, rerun=str(tmp_path) + "/e.rrd")
+
+
+# ----------------------------------------------------------------------------- benchmark
+def test_parallel_benchmark_reports_identical_arrays(tmp_path: object, small_chunks: None,
+                                                     ray_session: object) -> None:
+    import json
+    from pathlib import Path
+
+    from localization.workflows.benchmarks.parallel import ParallelBenchConfig, run_parallel_bench
+
+    out = Path(str(tmp_path))
+    rows = run_parallel_bench(ParallelBenchConfig(n=100, image_size=16, rounds=1,
+                                                  out_dir=str(out)))
+    assert [r["method"] for r in rows] == ["serial", "processes", "ray"]
+    assert all(r["identical"] for r in rows)
+    assert rows[0]["speedup"] == 1.0 and all(r["seconds"] > 0 < r["cpu_seconds"] for r in rows)
+    saved = json.loads((out / "bench_parallel.json").read_text())
+    assert saved["rows"] == json.loads(json.dumps(rows))
+    assert "| processes | 2 |" in (out / "bench_parallel.md").read_text()
