@@ -206,6 +206,24 @@ def summarize_drives(runs: list[dict[str, float]]) -> dict[str, Any]:
             "accepted": float(np.mean([r["accepted"] for r in runs]))}
 
 
+def _result(args: CoverageBenchConfig, done: list[int], cameras: list[str],
+            single: dict[str, dict[str, list[Any]]], loop: dict[str, dict[str, list[Any]]],
+            seconds: list[dict[str, Any]], t0: float) -> dict[str, Any]:
+    """The JSON result of the cities ``done`` so far."""
+    summary = {c: {"single": {m: summarize_single(single[c][m]) for m in METHODS},
+                   "closed_loop": {k: summarize_drives(v) for k, v in loop[c].items() if v}}
+               for c in cameras if all(single[c].values())}
+    return {"args": dataclasses.asdict(args), "machine": platform.platform(),
+            "seconds": time.perf_counter() - t0, "stage_seconds": seconds,
+            "thresholds": THRESHOLDS, "cameras": list(summary), "summary": summary,
+            "drives": loop,
+            "setup": f"cities {','.join(map(str, done))}, {args.image_size}x{args.image_size} "
+                     f"images, motion noise {args.motion_noise}, PixelPCA({args.n_components}) "
+                     f"on {args.n_train} coverage images per city; {args.n_test} test images "
+                     f"and {args.n_drives} off-lane drive(s) of {args.drive_steps} steps "
+                     f"per city"}
+
+
 def run_coverage_bench(args: CoverageBenchConfig) -> dict[str, Any]:
     """Run the benchmark; write ``bench_coverage.json`` / ``.md``; return the result."""
     args = args.resolved()
@@ -237,19 +255,9 @@ def run_coverage_bench(args: CoverageBenchConfig) -> dict[str, Any]:
                     loop[camera]["lanes"] += drives(args, env, lanes, base + 100)
                 env.close()
                 bar.update()
-    summary = {c: {"single": {m: summarize_single(single[c][m]) for m in METHODS},
-                   "closed_loop": {k: summarize_drives(v) for k, v in loop[c].items() if v}}
-               for c in cameras}
-    result = {"args": dataclasses.asdict(args), "machine": platform.platform(),
-              "seconds": time.perf_counter() - t0, "stage_seconds": seconds,
-              "thresholds": THRESHOLDS, "cameras": cameras, "summary": summary,
-              "drives": loop,
-              "setup": f"cities {args.cities}, {args.image_size}x{args.image_size} images, "
-                       f"motion noise {args.motion_noise}, PixelPCA({args.n_components}) on "
-                       f"{args.n_train} coverage images per city; {args.n_test} test images "
-                       f"and {args.n_drives} off-lane drive(s) of {args.drive_steps} steps "
-                       f"per city"}
-    (out / "bench_coverage.json").write_text(json.dumps(result, indent=2))
-    (out / "bench_coverage.md").write_text(markdown(result))
+                done = cities[: i + 1]  # written after every city: a long run keeps its part
+                result = _result(args, done, cameras, single, loop, seconds, t0)
+                (out / "bench_coverage.json").write_text(json.dumps(result, indent=2))
+                (out / "bench_coverage.md").write_text(markdown(result))
     print(markdown(result))
     return result
