@@ -39,7 +39,7 @@ from localization._validation import check_choice, check_int, check_real
 __all__ = ["REGIONS", "corner_mask", "coverage_poses", "street_mask"]
 
 REGIONS = ("streets", "free")
-CORNER_WEIGHT = 1.0  # a corner zone is twice as likely (a prior: not tuned)
+CORNER_WEIGHT = 1.0  # a corner zone is twice as likely (chosen on tuning city 13: docs/method.md §12)
 CORNER_REACH = 1.0  # m beyond the intersection square
 BATCH = 4096  # candidate positions per rejection round
 

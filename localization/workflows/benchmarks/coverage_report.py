@@ -64,4 +64,6 @@ def markdown(result: dict[str, Any]) -> str:
     for camera in result["cameras"]:
         for training, s in result["summary"][camera]["closed_loop"].items():
             lines.append(_loop_row(camera, training, s, training == "coverage"))
+    for failure in result.get("fit_failures", []):
+        lines += ["", f"Fit failed: {failure}"]
     return "\n".join(lines) + "\n"
