@@ -22,7 +22,7 @@ LAYERS: list[tuple[str, ...]] = [
      "localization.baselines", "localization.intrinsic_dim", "localization.synthetic"),
     ("localization.filtering",),
     ("localization.localizer", "localization._localizer_io", "localization._localizer_noise",
-     "localization._localizer_map",
+     "localization._localizer_map", "localization._localizer_belief",
      "localization.wrappers", "localization.wrapper_render", "localization.belief_render"),
     ("agents",),
     ("localization.workflows",),
