@@ -40,12 +40,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from localization._validation import check_int
+from localization._validation import check_int, check_real
 from localization.filtering._modes import Mode
 from localization.filtering.belief import BeliefFilter
 from localization.geometry import Array, wrap_angle
 
-__all__ = ["TRACKER_SOURCES", "ModeTracker"]
+__all__ = ["TRACKER_SOURCES", "ModeTracker", "make_tracker"]
 
 #: what the report came from at the last step (see the module docstring)
 TRACKER_SOURCES = ("ekf", "restarted", "mode")
@@ -103,12 +103,10 @@ class ModeTracker:
                  alpha: ArrayLike | None = None) -> None:
         for name, v in (("support_weight", support_weight),
                         ("confident_weight", confident_weight)):
-            if not 0.0 < float(v) <= 1.0:
-                raise ValueError(f"{name} must be in (0, 1], got {v}")
+            check_real(v, name, low=0.0, high=1.0, low_open=True)
         for name, v in (("radius", radius), ("heading_scale", heading_scale),
                         ("strong_nis", strong_nis)):
-            if not float(v) > 0.0:
-                raise ValueError(f"{name} must be positive, got {v}")
+            check_real(v, name, low=0.0, low_open=True)
         self.strong_steps = check_int(strong_steps, "strong_steps", low=1)
         self.max_gated = check_int(max_gated, "max_gated", low=1)
         self.max_unsupported = check_int(max_unsupported, "max_unsupported", low=1)
@@ -178,3 +176,15 @@ class ModeTracker:
         else:
             self._mode, self.source = dominant, "mode"
         return self.source
+
+
+def make_tracker(track_mode: bool | dict[str, Any], localizer: Any, motion_model: Any,
+                 measurement: str, **defaults: Any) -> ModeTracker | None:
+    """The tracker a particle belief's ``track_mode`` asks for: None (False), one with the
+    ``defaults`` (True), or one with a dict of settings over the ``defaults``."""
+    if isinstance(track_mode, dict):
+        return ModeTracker(localizer, motion_model, measurement, **{**defaults, **track_mode})
+    if not isinstance(track_mode, bool):
+        raise TypeError(f"track_mode must be a bool or a dict of ModeTracker settings, got "
+                        f"{track_mode!r}")
+    return ModeTracker(localizer, motion_model, measurement, **defaults) if track_mode else None

@@ -48,11 +48,12 @@ from numpy.typing import ArrayLike
 from scipy.special import logsumexp
 from scipy.stats import chi2
 from sklearn.exceptions import NotFittedError
-from sklearn.neighbors import NearestNeighbors
 
+from localization._validation import check_real
 from localization.filtering._modes import Mode, find_modes
+from localization.filtering.image_proposals import ImageProposals
 from localization.filtering.measurement_noise import inflate
-from localization.filtering.mode_tracker import ModeTracker
+from localization.filtering.mode_tracker import make_tracker
 from localization.filtering.particle_motion import (
     is_unicycle,
     predict_particles,
@@ -74,27 +75,6 @@ RESET_MODES = ("image", "global")
 PARTICLE_STATUSES = ("initial", "tracking", "ambiguous", "doubtful", "relocalizing", "lost",
                      "out_of_domain")
 SampleFree = Callable[[int, np.random.Generator], ArrayLike]
-
-
-def _tracker(track_mode: bool | dict[str, Any], localizer: Any, motion_model: Any,
-             measurement: str, alpha: Array, radius: float, heading_scale: float,
-             confident_weight: float) -> ModeTracker | None:
-    if isinstance(track_mode, dict):
-        return ModeTracker(localizer, motion_model, measurement, **{
-            "alpha": alpha, "radius": radius, "heading_scale": heading_scale,
-            "confident_weight": confident_weight, **track_mode})
-    if not isinstance(track_mode, bool):
-        raise TypeError(f"track_mode must be a bool or a dict of ModeTracker settings, got "
-                        f"{track_mode!r}")
-    return _tracker({}, localizer, motion_model, measurement, alpha, radius, heading_scale,
-                    confident_weight) if track_mode else None
-
-
-def _fraction(name: str, value: float, low_open: bool = False) -> float:
-    v = float(value)
-    if not (0.0 < v <= 1.0 if low_open else 0.0 <= v <= 1.0):
-        raise ValueError(f"{name} must be in {'(0' if low_open else '[0'}, 1], got {value}")
-    return v
 
 
 class ParticleBelief:
@@ -175,14 +155,15 @@ class ParticleBelief:
         localizer.measurement_model(measurement)  # raises NotFittedError without R
         self.localizer, self.motion_model, self.measurement = localizer, motion_model, measurement
         self.n_particles = int(n_particles)
-        self.resample_threshold = _fraction("resample_threshold", resample_threshold, True)
-        self.max_injection = _fraction("max_injection", max_injection)
-        self.injection_ratio = _fraction("injection_ratio", injection_ratio, True)
-        self.global_proposal_fraction = _fraction("global_proposal_fraction",
-                                                  global_proposal_fraction)
-        self.lost_ratio = _fraction("lost_ratio", lost_ratio)
-        self.doubt_ratio = _fraction("doubt_ratio", doubt_ratio)
-        self.confident_weight = _fraction("confident_weight", confident_weight)
+        unit, unit_open = {"low": 0.0, "high": 1.0}, {"low": 0.0, "high": 1.0, "low_open": True}
+        self.resample_threshold = check_real(resample_threshold, "resample_threshold", **unit_open)
+        self.max_injection = check_real(max_injection, "max_injection", **unit)
+        self.injection_ratio = check_real(injection_ratio, "injection_ratio", **unit_open)
+        self.global_proposal_fraction = check_real(global_proposal_fraction,
+                                                   "global_proposal_fraction", **unit)
+        self.lost_ratio = check_real(lost_ratio, "lost_ratio", **unit)
+        self.doubt_ratio = check_real(doubt_ratio, "doubt_ratio", **unit)
+        self.confident_weight = check_real(confident_weight, "confident_weight", **unit)
         self.resample, self.sample_free = resample, sample_free
         self.alpha_slow, self.alpha_fast = float(alpha_slow), float(alpha_fast)
         self.mode_radius, self.heading_scale = float(mode_radius), float(heading_scale)
@@ -205,12 +186,12 @@ class ParticleBelief:
                                          is None else proposal_noise, dtype=np.float64)
         if self.proposal_noise.shape != (3, 3):
             raise ValueError(f"proposal_noise must be (3, 3), got {self.proposal_noise.shape}")
-        self._train_poses = localizer.from_model(reg.theta_)
-        self._retrieval = NearestNeighbors(n_neighbors=min(int(n_neighbors), len(reg.theta_)))
-        self._retrieval.fit(reg.gse_.Z_[:, :self._m])  # standardised training features
+        self._proposals = ImageProposals(localizer, n_neighbors, self.proposal_noise)
         self.rng = np.random.default_rng(seed)
-        self.tracker = _tracker(track_mode, localizer, motion_model, measurement, self.alpha,
-                                self.mode_radius, self.heading_scale, self.confident_weight)
+        self.tracker = make_tracker(track_mode, localizer, motion_model, measurement,
+                                    alpha=self.alpha, radius=self.mode_radius,
+                                    heading_scale=self.heading_scale,
+                                    confident_weight=self.confident_weight)
         self.particles: Array | None = None
         self.log_weights: Array | None = None
         self.w_slow = self.w_fast = np.nan
@@ -274,22 +255,15 @@ class ParticleBelief:
 
     # --------------------------------------------------------------- proposals
     def proposals(self, w: ArrayLike) -> Array:
-        """Poses (k, 3) the image suggests: psi*(w) (when in domain), then the training
-        poses of its nearest training images in feature space."""
-        w = self._check_w(w)
-        reg = self.localizer.regressor_
-        ws = ((w - reg.w_mean_) / reg.w_scale_)[None]
-        idx = self._retrieval.kneighbors(ws, return_distance=False)[0]
-        psi = self.localizer.measure(w, "pose")[None]
-        return np.vstack([psi[np.all(np.isfinite(psi), axis=1)], self._train_poses[idx]])
+        """Poses (k, 3) the image suggests (:class:`ImageProposals`)."""
+        return self._proposals(self._check_w(w))
 
     def _jitter(self, centres: Array, n: int) -> Array:
-        X = centres[self.rng.integers(len(centres), size=n)]
-        return X + sample_body_noise(X[:, 2], self.proposal_noise, self.rng)
+        return self._proposals.jitter(centres, n, self.rng)
 
     def _free(self, n: int) -> Array:
         if self.sample_free is None:
-            return self._jitter(self._train_poses, n)
+            return self._jitter(self._proposals.train_poses, n)
         X = np.asarray(self.sample_free(n, self.rng), dtype=np.float64)
         if X.shape != (n, 3) or not np.all(np.isfinite(X)):
             raise ValueError(f"sample_free must return finite poses of shape ({n}, 3), got "
