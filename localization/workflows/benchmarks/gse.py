@@ -57,7 +57,9 @@ from typing import Any
 
 import numpy as np
 
+from localization.workflows.benchmarks.gse_accuracy import run_accuracy
 from localization.workflows.benchmarks.gse_scale import (
+    fmt_value,
     incremental_markdown,
     incremental_worker,
     scalable_markdown,
@@ -272,70 +274,7 @@ def growth_exponent(rows: list[dict[str, Any]]) -> float | None:
     return float(np.polyfit(n, t, 1)[0])
 
 
-# ---------------------------------------------------------------- accuracy
-def _lift_pose(T: np.ndarray) -> np.ndarray:
-    """Pose -> input features for the baselines' Phi: yaw as (cos, sin)."""
-    if T.shape[1] == 3:
-        return np.column_stack([T[:, :2], np.cos(T[:, 2]), np.sin(T[:, 2])])
-    return T
-
-
-def run_accuracy(args: GSEBenchConfig) -> list[dict[str, Any]]:
-    from localization.baselines import KernelRegressor, RetrievalRegressor
-    from localization.gse.regressor import GSERegressor
-    from localization.metrics import angular_rmse, rrmse
-    from localization.synthetic import regression_manifold
-
-    rows = []
-    for dim in [int(s) for s in args.accuracy_dims.split(",") if s.strip()]:
-        W, T, phi = regression_manifold(args.accuracy_n_train, dim_theta=dim, m=args.m,
-                                        seed=args.seed, map_seed=args.map_seed)
-        Wt, Tt, _ = regression_manifold(args.accuracy_n_test, dim_theta=dim, m=args.m,
-                                        seed=args.seed + 1, map_seed=args.map_seed)
-        per = (2,) if dim == 3 else ()
-        Wtrue = phi(Tt)
-        models: dict[str, tuple[Any, Any]] = {
-            "GSE": (GSERegressor(periodic=per, n_neighbors=args.n_neighbors,
-                                 random_state=args.seed), None),
-            "KNR": (KernelRegressor(periodic=per), KernelRegressor()),
-            "retrieval k=1": (RetrievalRegressor(n_neighbors=1, periodic=per),
-                              RetrievalRegressor(n_neighbors=1)),
-            "retrieval k=cv": (RetrievalRegressor(n_neighbors="cv", periodic=per),
-                               RetrievalRegressor(n_neighbors="cv")),
-        }
-        for name, (loc, fm) in models.items():
-            row: dict[str, Any] = {"dim_theta": dim, "method": name, "n_train": len(W),
-                                   "n_test": len(Wt)}
-            print(f"[accuracy] dim_theta={dim} {name} ...", flush=True)
-            try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    t0 = time.perf_counter()
-                    loc.fit(W, T)
-                    row["fit_s"] = time.perf_counter() - t0
-                    pred = loc.predict(Wt)
-                    if fm is None:  # GSE: one model gives both directions
-                        wpred = loc.predict_features(Tt)
-                    else:
-                        wpred = fm.fit(_lift_pose(T), W).predict(_lift_pose(Tt))
-                row["psi_position_rrmse"] = rrmse(pred, Tt, columns=(0, 1))
-                row["heading_rmse_rad"] = angular_rmse(pred[:, 2], Tt[:, 2]) if dim == 3 else None
-                row["phi_rrmse"] = rrmse(wpred, Wtrue)
-                if hasattr(loc, "bandwidth_"):
-                    row["knr_bandwidth"] = loc.bandwidth_
-                if getattr(loc, "n_neighbors_", None) is not None and name.startswith("retr"):
-                    row["k"] = loc.n_neighbors_
-            except Exception as exc:  # noqa: BLE001  (report, keep benchmarking the others)
-                row["error"] = f"{type(exc).__name__}: {exc}"[:200]
-            rows.append(row)
-    return rows
-
-
 # ---------------------------------------------------------------- report
-def _f(x: Any, fmt: str = "{:.3f}") -> str:
-    return "-" if x is None else fmt.format(x)
-
-
 def targets(args: GSEBenchConfig, scaling: list[dict[str, Any]], expo: float | None) -> list[dict]:
     by_n = {r["n"]: r for r in scaling if "fit_s" in r}
     out = []
@@ -397,7 +336,7 @@ def markdown(args: GSEBenchConfig, res: dict[str, Any]) -> str:
         local = ", ".join(f"{e['n_from']}->{e['n_to']}: {e['exponent']:.2f}"
                           for e in res["local_growth_exponents"])
         lines += ["", ("Growth exponent of fit time vs n (least squares over all n): "
-                       f"{_f(res['growth_exponent'], '{:.2f}')}; between consecutive n: {local}"),
+                       f"{fmt_value(res['growth_exponent'], '{:.2f}')}; between consecutive n: {local}"),
                   ""]
     if res["accuracy"]:
         lines += ["## Accuracy (RRMSE; lower is better)", "",
@@ -410,9 +349,9 @@ def markdown(args: GSEBenchConfig, res: dict[str, Any]) -> str:
             elif "knr_bandwidth" in r:
                 note = f"h = {r['knr_bandwidth']:.3g}"
             lines.append(f"| {r['dim_theta']} | {r['method']} | "
-                         f"{_f(r.get('psi_position_rrmse'), '{:.4f}')} | "
-                         f"{_f(r.get('heading_rmse_rad'), '{:.4f}')} | "
-                         f"{_f(r.get('phi_rrmse'), '{:.4f}')} | {_f(r.get('fit_s'), '{:.2f}')} | "
+                         f"{fmt_value(r.get('psi_position_rrmse'), '{:.4f}')} | "
+                         f"{fmt_value(r.get('heading_rmse_rad'), '{:.4f}')} | "
+                         f"{fmt_value(r.get('phi_rrmse'), '{:.4f}')} | {fmt_value(r.get('fit_s'), '{:.2f}')} | "
                          f"{note} |")
         lines.append("")
     if res.get("scalable"):
@@ -423,7 +362,7 @@ def markdown(args: GSEBenchConfig, res: dict[str, Any]) -> str:
         lines += ["## Targets", "", "| target | value | limit | status |", "|---|---|---|---|"]
         for t in res["targets"]:
             u = f" {t['unit']}" if t["unit"] else ""
-            lines.append(f"| {t['target']} | {_f(t['value'], '{:.3f}')}{u} | "
+            lines.append(f"| {t['target']} | {fmt_value(t['value'], '{:.3f}')}{u} | "
                          f"<= {t['limit']:g}{u} | {t['status']} |")
         lines.append("")
     return "\n".join(lines)
@@ -473,7 +412,7 @@ def run_gse_bench(args: GSEBenchConfig) -> dict[str, Any]:
     print("\n" + md)
     for t in res["targets"]:
         u = f" {t['unit']}" if t["unit"] else ""
-        print(f"{t['status']:8s} {t['target']}: {_f(t['value'], '{:.3f}')}{u} "
+        print(f"{t['status']:8s} {t['target']}: {fmt_value(t['value'], '{:.3f}')}{u} "
               f"(limit {t['limit']:g}{u})")
     print(f"\nwrote {out.with_suffix('.json')} and {out.with_suffix('.md')}")
     return res

@@ -174,7 +174,8 @@ def scalable_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "n_range": [ok[0]["n"], ok[-1]["n"]] if ok else None}
 
 
-def _f(x: Any, fmt: str = "{:.3f}") -> str:
+def fmt_value(x: Any, fmt: str = "{:.3f}") -> str:
+    """``x`` formatted, "-" for None (the GSE benchmark's table cells)."""
     return "-" if x is None else fmt.format(x)
 
 
@@ -197,7 +198,7 @@ def scalable_markdown(rows: list[dict[str, Any]], summary: dict[str, Any]) -> li
                          f"{e['peak_rss_delta_mib']:.0f} | {e['predict_1_ms']:.3f} | "
                          f"{e['position_rrmse']:.5f} | {e['heading_rmse_rad']:.4f} | 1 | 1 |")
     lines += ["", (f"Growth exponent of the scalable fit time over n = {summary['n_range']}: "
-                   f"{_f(summary['growth_exponent'], '{:.2f}')}"), ""]
+                   f"{fmt_value(summary['growth_exponent'], '{:.2f}')}"), ""]
     return lines
 
 
