@@ -83,3 +83,10 @@ def held_out_localizer(scene_seed: int):
                                     localizer_params={"features_params": {"n_components": 16}},
                                     calibrate_on_belief=False, measurements=("representation",))
     return env, loc
+
+
+@pytest.fixture(scope="module")
+def features(localizer, drive):
+    """The drive's features W (n, m), poses (n, 3) and controls (n - 1, 2)."""
+    images, poses, controls = drive
+    return localizer.transform(images), poses, controls

@@ -10,16 +10,9 @@ import pytest
 
 import envs  # noqa: F401
 from envs.motion_model import UnicycleModel
-from localization.filtering.mode_tracker import TRACKER_SOURCES, ModeTracker
 from localization.filtering.particles import ParticleBelief
 
 DT = 0.1
-
-
-@pytest.fixture(scope="module")
-def features(localizer, drive):
-    images, poses, controls = drive
-    return localizer.transform(images), poses, controls
 
 
 def _belief(localizer, **kw) -> ParticleBelief:
@@ -123,8 +116,3 @@ def test_same_seed_same_run(localizer, features):
 def test_bad_settings_raise_clear_errors(localizer, track_mode, error, match):
     with pytest.raises(error, match=match):
         _belief(localizer, track_mode=track_mode)
-
-
-def test_sources_are_documented():
-    assert set(TRACKER_SOURCES) == {"ekf", "restarted", "mode"}
-    assert ModeTracker.__doc__ and "support_weight" in ModeTracker.__doc__

@@ -21,12 +21,6 @@ from ..conftest import held_out_localizer
 DT = 0.1
 
 
-@pytest.fixture(scope="module")
-def features(localizer, drive):
-    images, poses, controls = drive
-    return localizer.transform(images), poses, controls
-
-
 def _belief(localizer, **kw) -> ParticleBelief:
     return ParticleBelief(localizer, UnicycleModel(DT), **{"n_particles": 500, "seed": 0, **kw})
 
