@@ -13,11 +13,8 @@ log-weights ``l_i``; with the names of the code::
               of the particles at the image's proposals
     resample: when ESS = 1 / sum w_i^2 < resample_threshold N, or particles are injected
 
-(k the localizer's ``control_gain_``, a its calibrated ``consistency(measurement)``).
-``injection_ratio = 1`` is Thrun et al.'s Augmented MCL (Probabilistic Robotics, table
-8.3); the default 0.7 leaves the ordinary ups and downs of the likelihood alone (w_fast /
-w_slow wanders in 0.8-1.2 while tracking), and leaving the fresh particles out of w_avg
-keeps injected particles from lowering it and calling for more injections.
+(k the localizer's ``control_gain_``, a its calibrated ``consistency(measurement)``;
+the averages: :mod:`localization.filtering.augmented_mcl`).
 The squared Mahalanobis distance ``d2_i`` of the measurement at particle ``X_i`` follows
 the localizer's three measurement models (R as in ``localizer.measurement_model``):
 
@@ -49,8 +46,9 @@ from scipy.special import logsumexp
 from scipy.stats import chi2
 from sklearn.exceptions import NotFittedError
 
-from localization._validation import check_real
+from localization._validation import check_int, check_real
 from localization.filtering._modes import Mode, find_modes
+from localization.filtering.augmented_mcl import LikelihoodAverages
 from localization.filtering.image_proposals import ImageProposals
 from localization.filtering.measurement_noise import inflate
 from localization.filtering.mode_tracker import make_tracker
@@ -117,6 +115,8 @@ class ParticleBelief:
         it, 1.9 % of the steps of nominal drives.
     mode_radius, heading_scale : float
         Mode kernel (m) and metres per radian (:func:`~localization.filtering._modes.find_modes`).
+    max_modes : int
+        At most this many hypotheses are summarised (the rest of the weight is in none).
     seed : int or None
         Seeds every draw (numpy Generator); the same seed gives the same run.
     """
@@ -131,16 +131,13 @@ class ParticleBelief:
                  global_proposal_fraction: float = 0.2, sample_free: SampleFree | None = None,
                  lost_ratio: float = 0.2, doubt_ratio: float = 0.02,
                  confident_weight: float = 0.8,
-                 mode_radius: float = 1.0, heading_scale: float = 2.0,
+                 mode_radius: float = 1.0, heading_scale: float = 2.0, max_modes: int = 5,
                  track_mode: bool | dict[str, Any] = True,
                  seed: int | None = None) -> None:
         if measurement not in MEASUREMENTS:
             raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
         if isinstance(n_particles, bool) or int(n_particles) != n_particles or n_particles < 1:
             raise ValueError(f"n_particles must be a positive integer, got {n_particles}")
-        if not (0.0 < alpha_slow < alpha_fast <= 1.0):
-            raise ValueError(f"need 0 < alpha_slow < alpha_fast <= 1, got {alpha_slow}, "
-                             f"{alpha_fast}")
         if not 0.0 < gate_probability < 1.0:
             raise ValueError(f"gate_probability must be in (0, 1), got {gate_probability}")
         if int(n_neighbors) < 1:
@@ -157,16 +154,15 @@ class ParticleBelief:
         self.n_particles = int(n_particles)
         unit, unit_open = {"low": 0.0, "high": 1.0}, {"low": 0.0, "high": 1.0, "low_open": True}
         self.resample_threshold = check_real(resample_threshold, "resample_threshold", **unit_open)
-        self.max_injection = check_real(max_injection, "max_injection", **unit)
-        self.injection_ratio = check_real(injection_ratio, "injection_ratio", **unit_open)
+        self.amcl = LikelihoodAverages(alpha_slow, alpha_fast, injection_ratio, max_injection)
         self.global_proposal_fraction = check_real(global_proposal_fraction,
                                                    "global_proposal_fraction", **unit)
         self.lost_ratio = check_real(lost_ratio, "lost_ratio", **unit)
         self.doubt_ratio = check_real(doubt_ratio, "doubt_ratio", **unit)
         self.confident_weight = check_real(confident_weight, "confident_weight", **unit)
         self.resample, self.sample_free = resample, sample_free
-        self.alpha_slow, self.alpha_fast = float(alpha_slow), float(alpha_fast)
         self.mode_radius, self.heading_scale = float(mode_radius), float(heading_scale)
+        self.max_modes = check_int(max_modes, "max_modes", low=1)
         self.alpha = (localizer.consistency(measurement) if alpha is None
                       else np.asarray(alpha, dtype=np.float64))
         if self.alpha.shape != (3,) or not np.all(self.alpha > 0):
@@ -194,7 +190,6 @@ class ParticleBelief:
                                     confident_weight=self.confident_weight)
         self.particles: Array | None = None
         self.log_weights: Array | None = None
-        self.w_slow = self.w_fast = np.nan
         self.modes: list[Mode] = []
         self.status = "initial"
         self.injected = 0
@@ -251,7 +246,7 @@ class ParticleBelief:
         n = len(X)
         self.log_weights = np.full(n, -np.log(n)) if log_w is None else log_w - logsumexp(log_w)
         self.modes = find_modes(self.particles, np.exp(self.log_weights), self.mode_radius,
-                                self.heading_scale)
+                                self.heading_scale, self.max_modes)
 
     # --------------------------------------------------------------- proposals
     def proposals(self, w: ArrayLike) -> Array:
@@ -302,7 +297,7 @@ class ParticleBelief:
         self._set(X)
         if self.tracker is not None:
             self.tracker.reset(w, self.modes[0], known=x0 is not None)
-        self.w_slow = self.w_fast = np.nan
+        self.amcl.reset()
         self.status, self.injected = "initial", 0
         self._fresh = np.zeros(self.n_particles, dtype=bool)
         return self.status
@@ -365,14 +360,10 @@ class ParticleBelief:
         old = self.log_weights[~self._fresh] if (~self._fresh).any() else self.log_weights
         w_avg = float(np.exp(logsumexp(old + log_L[~self._fresh] if (~self._fresh).any()
                                        else old + log_L) - logsumexp(old)))
-        self.w_slow = w_avg if np.isnan(self.w_slow) else \
-            self.w_slow + self.alpha_slow * (w_avg - self.w_slow)
-        self.w_fast = w_avg if np.isnan(self.w_fast) else \
-            self.w_fast + self.alpha_fast * (w_avg - self.w_fast)
+        self.amcl.update(w_avg)
         log_w = self.log_weights + log_L
         log_w -= logsumexp(log_w)
-        p_inject = min(self.max_injection,
-                       max(0.0, 1.0 - self.w_fast / (self.injection_ratio * self.w_slow)))
+        p_inject = self.amcl.injection_probability
         n_inject = int(self.rng.binomial(self.n_particles, p_inject)) if p_inject > 0 else 0
         if n_inject > 0 or 1.0 / np.sum(np.exp(2 * log_w)) < self.resample_threshold * len(log_w):
             self._resample(log_w, n_inject, w)
@@ -415,20 +406,23 @@ class ParticleBelief:
         self._set(X)
 
     def _status(self, w_avg: float) -> str:
-        if self.w_fast < self.lost_ratio * self.w_slow:
+        if self.amcl.w_fast < self.lost_ratio * self.amcl.w_slow:
             return "lost"
         if self.injected > 0:
             return "relocalizing"
-        if w_avg < self.doubt_ratio * self.w_slow:
+        if w_avg < self.doubt_ratio * self.amcl.w_slow:
             return "doubtful"
         if self.modes[0].weight < self.confident_weight:
             return "ambiguous"
         return "tracking"
 
     def run(self, W: ArrayLike, controls: ArrayLike, x0: ArrayLike | None = None,
-            P0: ArrayLike | None = None, mode: str = "image") -> tuple[Array, Array, list[str]]:
+            P0: ArrayLike | None = None, mode: str = "image",
+            hypotheses: list[dict[str, Array]] | None = None
+            ) -> tuple[Array, Array, list[str]]:
         """Filter a recorded sequence: features ``W`` (n + 1, m) of frames 0..n and the
-        controls (n, 2) between them.
+        controls (n, 2) between them; a list passed as ``hypotheses`` receives each frame's
+        :attr:`hypotheses`.
 
         Returns
         -------
@@ -442,8 +436,12 @@ class ParticleBelief:
                              f"{controls.shape}")
         statuses = [self.reset(W[0], mode, x0, P0)]
         means, covs = [self.pose_mean], [self.pose_cov]
+        record = (lambda: None) if hypotheses is None else \
+            (lambda: hypotheses.append(self.hypotheses))
+        record()
         for u, w in zip(controls, W[1:]):
             statuses.append(self.step(u, w)[1])
             means.append(self.pose_mean)
             covs.append(self.pose_cov)
+            record()
         return np.array(means), np.array(covs), statuses

@@ -108,17 +108,20 @@ def record_kidnap_drive(env: gym.Env, localizer: Any, steps_before: int, steps_a
 
 
 def run_filter(name: str, drive: KidnapDrive, localizer: Any, motion_model: Any,
-               seed: int = 0, **options: Any) -> tuple[Array, Array, list[str]]:
+               seed: int = 0, hypotheses: list[dict[str, Array]] | None = None,
+               **options: Any) -> tuple[Array, Array, list[str]]:
     """Replay ``drive`` through filter ``name`` (one of ``FILTERS``) started at the true
     start pose; ``options`` go to its constructor. Returns means, covs and the belief's
     statuses ("tracking", "ambiguous", "relocalizing", "lost", ...: what the wrapper reports
-    as ``info["belief_status"]``; for the EKF not its measurement statuses)."""
+    as ``info["belief_status"]``; for the EKF not its measurement statuses). A list passed
+    as ``hypotheses`` receives each frame's hypotheses ("weights" (k,), "means" (k, 3));
+    the EKF has one, its own mean."""
     if name not in FILTERS:
         raise ValueError(f"unknown filter {name!r}; choose one of {FILTERS}")
     P0 = np.diag([0.01, 0.01, 0.001])
     if name not in ("ekf", "ekf_detect"):
         f = ParticleBelief(localizer, motion_model, seed=seed, **options)
-        return f.run(drive.W, drive.controls, x0=drive.poses[0], P0=P0)
+        return f.run(drive.W, drive.controls, x0=drive.poses[0], P0=P0, hypotheses=hypotheses)
     options = {"detect_divergence": name == "ekf_detect", **options}
     ekf = BeliefFilter(localizer, motion_model, **options)
     ekf.reset(drive.W[0], drive.poses[0], P0)
@@ -128,6 +131,8 @@ def run_filter(name: str, drive: KidnapDrive, localizer: Any, motion_model: Any,
         means.append(ekf.x)
         covs.append(ekf.P)
         statuses.append(ekf.belief_status)
+    if hypotheses is not None:
+        hypotheses += [{"weights": np.ones(1), "means": m[None]} for m in means]
     return np.array(means), np.array(covs), statuses
 
 

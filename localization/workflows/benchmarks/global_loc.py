@@ -61,6 +61,7 @@ from tqdm import tqdm
 from localization.geometry import wrap_angle
 from localization.workflows import kidnap_eval as ke
 from localization.workflows.benchmarks import global_agents as ga
+from localization.workflows.benchmarks.global_report import markdown
 from localization.workflows.tracking import fit_city_localizer
 
 __all__ = ["LOST_STATUSES", "TARGETS", "GlobalBenchConfig", "run_global_bench"]
@@ -142,15 +143,45 @@ def admitted(means: np.ndarray, covs: np.ndarray, statuses: list[str], poses: np
     return int(lost.sum()), int((lost & (says | (d2 <= 9.0))).sum())
 
 
-def wrong_twin_run(means: np.ndarray, poses: np.ndarray, city: Any, start: int) -> int:
-    """Longest run of frames from ``start`` with the belief on a wrong twin of the truth."""
-    best = run = 0
-    for m, p in zip(means[start:], poses[start:]):
+def on_wrong_twin(means: np.ndarray, poses: np.ndarray, city: Any) -> np.ndarray:
+    """Per frame (n,) bool: the reported position lies within ``TWIN_RADIUS`` of a twin of
+    the true one and more than ``LOST_ERROR`` from the truth."""
+    out = np.zeros(len(means), dtype=bool)
+    for t, (m, p) in enumerate(zip(means, poses)):
         twins = p[:2] + city.twin_shifts(p[:2])
-        on_twin = len(twins) and np.min(np.hypot(*(twins - m[:2]).T)) < TWIN_RADIUS
-        run = run + 1 if on_twin and np.hypot(*(m[:2] - p[:2])) > LOST_ERROR else 0
+        out[t] = bool(len(twins) and np.min(np.hypot(*(twins - m[:2]).T)) < TWIN_RADIUS
+                      and np.hypot(*(m[:2] - p[:2])) > LOST_ERROR)
+    return out
+
+
+def longest_run(flags: np.ndarray) -> int:
+    """Length of the longest stretch of True in ``flags`` (n,)."""
+    best = run = 0
+    for f in flags:
+        run = run + 1 if f else 0
         best = max(best, run)
     return best
+
+
+def wrong_twin_run(means: np.ndarray, poses: np.ndarray, city: Any, start: int,
+                   statuses: list[str] | None = None) -> int:
+    """Longest run of frames from ``start`` with the belief committed to a wrong twin: its
+    report on a wrong twin (:func:`on_wrong_twin`) while its status (when ``statuses`` are
+    given) claims to know, i.e. is not one of :data:`LOST_STATUSES`. Without ``statuses``:
+    the report on a wrong twin whatever the status says."""
+    flags = on_wrong_twin(means[start:], poses[start:], city)
+    if statuses is not None:
+        flags &= ~np.isin(np.asarray(statuses[start:]), LOST_STATUSES)
+    return longest_run(flags)
+
+
+def truth_kept(hypotheses: list[dict[str, np.ndarray]], poses: np.ndarray,
+               flags: np.ndarray) -> tuple[int, int]:
+    """(frames flagged, of them frames with a hypothesis mean within ``LOST_ERROR`` of the
+    true position): does the belief keep the true twin while it reports a wrong one?"""
+    kept = sum(bool(np.any(np.hypot(*(h["means"][:, :2] - p[:2]).T) < LOST_ERROR))
+               for h, p, f in zip(hypotheses, poses, flags) if f)
+    return int(flags.sum()), int(kept)
 
 
 def nees(means: np.ndarray, covs: np.ndarray, poses: np.ndarray) -> np.ndarray:
@@ -186,15 +217,29 @@ def kidnaps(env: gym.Env, loc: Any, args: GlobalBenchConfig, n: int, seed: int,
     for k in range(n):
         drive = ke.record_kidnap_drive(env, loc, args.steps_before, args.steps_after, seed + k)
         for name, recs in out.items():
-            means, covs, statuses = ke.run_filter(name, drive, loc, mm, seed + k)
+            hyps: list[dict[str, np.ndarray]] = []
+            means, covs, statuses = ke.run_filter(name, drive, loc, mm, seed + k,
+                                                  hypotheses=hyps)
             lost, said = admitted(means, covs, statuses, drive.poses, drive.kidnap)
             rec = {"steps": ke.steps_to_recover(means, drive.poses, drive.kidnap),
                    "lost_steps": lost, "admitted_steps": said}
             if hasattr(city, "twin_shifts"):
-                rec["wrong_twin_run"] = wrong_twin_run(means, drive.poses, city, drive.kidnap)
+                rec.update(twin_scores(means, statuses, hyps, drive, city))
             recs.append(rec)
         bar.update()
     return out
+
+
+def twin_scores(means: np.ndarray, statuses: list[str], hypotheses: list[dict[str, np.ndarray]],
+                drive: Any, city: Any) -> dict[str, int]:
+    """Look-alike scores of one drive from its kidnap on: the longest run committed to a
+    wrong twin, the longest run reported on one (any status), and the frames reported on a
+    wrong twin with / without a hypothesis at the truth."""
+    k = drive.kidnap
+    flags = on_wrong_twin(means[k:], drive.poses[k:], city)
+    frames, kept = truth_kept(hypotheses[k:], drive.poses[k:], flags)
+    return {"wrong_twin_run": wrong_twin_run(means, drive.poses, city, k, statuses),
+            "twin_report_run": longest_run(flags), "twin_frames": frames, "twin_kept": kept}
 
 
 def nominal(env: gym.Env, loc: Any, args: GlobalBenchConfig, seed: int,
@@ -231,8 +276,14 @@ def summarize_kidnaps(recs: list[dict[str, Any]]) -> dict[str, float]:
            "admitted_while_lost": sum(r["admitted_steps"] for r in recs) / lost if lost
            else float("nan")}
     if recs and "wrong_twin_run" in recs[0]:
-        out["wrong_twin_runs"] = float(np.mean([r["wrong_twin_run"] > WRONG_TWIN_STEPS
-                                                for r in recs]))
+        frames = sum(r["twin_frames"] for r in recs)
+        out.update({
+            "wrong_twin_runs": float(np.mean([r["wrong_twin_run"] > WRONG_TWIN_STEPS
+                                              for r in recs])),
+            "twin_report_runs": float(np.mean([r["twin_report_run"] > WRONG_TWIN_STEPS
+                                               for r in recs])),
+            "twin_frames": int(frames),
+            "twin_kept": sum(r["twin_kept"] for r in recs) / frames if frames else float("nan")})
     return out
 
 
@@ -244,67 +295,6 @@ def summarize_nominal(recs: list[dict[str, float]]) -> dict[str, float]:
             "nees_mean": float(np.mean([r["nees_mean"] for r in recs])),
             "nees_band": [float(lo), float(hi)],
             "ms_per_step": float(np.mean([r["ms_per_step"] for r in recs]))}
-
-
-# ---------------------------------------------------------------- report
-def _pct(v: float) -> str:
-    return "n/a" if v is None or not np.isfinite(v) else f"{100 * v:.0f} %"
-
-
-def _num(v: float, fmt: str = ".1f") -> str:
-    return "n/a" if v is None else ("inf" if v == np.inf else format(v, fmt))
-
-
-def _mark(ok: bool | None) -> str:
-    return "" if ok is None else (" PASS" if ok else " MISS")
-
-
-def markdown(result: dict[str, Any]) -> str:
-    """The side-by-side table of ``result`` (rows = measures, columns = filters)."""
-    s, names = result["summary"], result["filters"]
-    ekf_rmse = s["ekf"]["nominal"]["rmse"] if "ekf" in s else None
-    rows: list[tuple[str, str, list[str]]] = []
-
-    def row(label: str, target: str, cell: Any) -> None:
-        rows.append((label, target, [cell(s[n], n) for n in names]))
-
-    k = lambda f: f["kidnap"]
-    row(f"kidnap: recovered within 30 steps (n = {s[names[0]]['kidnap']['n']})", ">= 95 %",
-        lambda f, n: _pct(k(f)["recovered_within_30"]) + _mark(k(f)["recovered_within_30"] >= 0.95))
-    row("kidnap: median / p95 steps to recover", "median <= 10",
-        lambda f, n: f"{_num(k(f)['median_steps'], '.0f')} / {_num(k(f)['p95_steps'], '.0f')}"
-        + _mark(k(f)["median_steps"] <= 10))
-    row("kidnap: while lost (> 1 m), status lost or truth in 3-sigma", ">= 90 %",
-        lambda f, n: f"{_pct(k(f)['admitted_while_lost'])} of {k(f)['lost_steps']}"
-        + _mark(None if not k(f)["lost_steps"] else k(f)["admitted_while_lost"] >= 0.9))
-    row("global start: localized within 30 steps", ">= 95 %",
-        lambda f, n: "n/a" if f["global"] is None else
-        f"{_pct(f['global']['recovered_within_30'])} of {f['global']['n']}"
-        + _mark(f["global"]["recovered_within_30"] >= 0.95))
-    row(f"look-alike city {result['args']['lookalike_city']}: runs on a wrong twin > 20 steps",
-        "<= 5 %", lambda f, n: f"{_pct(f['lookalike']['wrong_twin_runs'])} of "
-        f"{f['lookalike']['n']}" + _mark(f["lookalike"]["wrong_twin_runs"] <= 0.05))
-    row("look-alike city: recovered within 30 steps", "",
-        lambda f, n: _pct(f["lookalike"]["recovered_within_30"]))
-    row("nominal: position RMSE (m)", "<= 1.2 x EKF",
-        lambda f, n: f"{f['nominal']['rmse']:.3f}" + ("" if ekf_rmse is None or n == "ekf" else
-                                                      _mark(f["nominal"]["rmse"] <= 1.2 * ekf_rmse)))
-    row("nominal: mean NEES (3 dof)", "in band",
-        lambda f, n: f"{f['nominal']['nees_mean']:.2f} [{f['nominal']['nees_band'][0]:.2f}, "
-        f"{f['nominal']['nees_band'][1]:.2f}]" + _mark(
-            f["nominal"]["nees_band"][0] <= f["nominal"]["nees_mean"] <= f["nominal"]["nees_band"][1]))
-    row("cost: ms per step (one core)", "<= 20",
-        lambda f, n: f"{f['nominal']['ms_per_step']:.1f}" + _mark(f["nominal"]["ms_per_step"] <= 20))
-    row("agents: scripted agent, one kidnap per episode: success", ">= 90 % (particles)",
-        lambda f, n: "n/a" if f.get("agents") is None else
-        f"{_pct(f['agents']['success_rate'])} ± {_pct(f['agents']['success_se'])} of "
-        f"{f['agents']['episodes']}" + ("" if n != "particles" else
-                                         _mark(f["agents"]["success_rate"] >= 0.9)))
-    lines = [f"Global localization ({result['setup']}):", "",
-             "| measure | target | " + " | ".join(names) + " |",
-             "|---|---|" + "---:|" * len(names)]
-    lines += [f"| {label} | {target} | " + " | ".join(cells) + " |" for label, target, cells in rows]
-    return "\n".join(lines) + "\n"
 
 
 def run_global_bench(args: GlobalBenchConfig) -> dict[str, Any]:

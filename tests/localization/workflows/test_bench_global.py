@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from localization.workflows.benchmarks.global_loc import (
     admitted,
     nees,
     run_global_bench,
+    twin_scores,
     wrong_twin_run,
 )
 
@@ -41,6 +43,33 @@ def test_wrong_twin_run_is_the_longest_stretch_on_a_twin():
     means[27:, 0] += 2.5  # lost, but not on a twin
     assert wrong_twin_run(means, poses, city, 0) == 22
     assert wrong_twin_run(means, poses, city, 10) == 17
+
+
+def test_a_wrong_twin_counts_as_committed_only_while_the_status_claims_to_know():
+    city = generate_lookalike_city(0)
+    poses = np.tile([-3.0, -9.0, 0.0], (30, 1))
+    means = poses.copy()
+    means[5:27, 0] += city.period  # 22 steps on the twin one block east
+    statuses = ["tracking"] * 30
+    statuses[8:12] = ["ambiguous"] * 4  # owns up to it for 4 steps: runs of 3 and 15
+    assert wrong_twin_run(means, poses, city, 0, statuses) == 15
+    assert wrong_twin_run(means, poses, city, 0, ["ambiguous"] * 30) == 0
+    assert wrong_twin_run(means, poses, city, 0) == 22  # the report alone
+
+
+def test_twin_scores_count_frames_that_keep_the_truth_as_a_hypothesis():
+    city = generate_lookalike_city(0)
+    poses = np.tile([-3.0, -9.0, 0.0], (10, 1))
+    means = poses.copy()
+    means[2:8, 0] += city.period
+    hyps = [{"weights": np.array([0.6, 0.4]), "means": np.array([m, p])}
+            for m, p in zip(means, poses)]
+    for t in (2, 3):  # the true twin dropped
+        hyps[t] = {"weights": np.ones(1), "means": means[t][None]}
+    drive = SimpleNamespace(kidnap=1, poses=poses)
+    scores = twin_scores(means, ["ambiguous"] * 10, hyps, drive, city)
+    assert scores == {"wrong_twin_run": 0, "twin_report_run": 6, "twin_frames": 6,
+                      "twin_kept": 4}
 
 
 def test_nees_wraps_the_heading():
@@ -78,7 +107,7 @@ def test_quick_run_end_to_end(tmp_path: Path):
         assert s["agents"]["episodes"] == 1 and 0.0 <= s["agents"]["success_rate"] <= 1.0
         assert s["kidnap"]["n"] == 2 and s["lookalike"]["n"] == 1
         assert 0.0 <= s["kidnap"]["recovered_within_30"] <= 1.0
-        assert 0.0 <= s["lookalike"]["wrong_twin_runs"] <= 1.0
+        assert 0.0 <= s["lookalike"]["wrong_twin_runs"] <= s["lookalike"]["twin_report_runs"] <= 1
         for key in ("rmse", "nees_mean", "ms_per_step"):
             assert math.isfinite(s["nominal"][key]) and s["nominal"][key] > 0, key
         assert s["kidnap"]["lost_steps"] > 0  # a kidnap of >= 5 m does throw every belief off
