@@ -14,7 +14,7 @@ import numpy as np
 from sklearn.neighbors import NearestNeighbors
 
 from localization.filtering.particle_motion import sample_body_noise
-from localization.geometry import Array
+from localization.geometry import Array, wrap_angle
 
 __all__ = ["ImageProposals"]
 
@@ -48,11 +48,23 @@ class ImageProposals:
     def __call__(self, w: Array) -> Array:
         """Poses (k, 3) the features ``w`` (m,) suggest: psi*(w) first (when in domain),
         then the training poses of the nearest training images."""
+        psi = self.localizer.measure(w, "pose")[None]
+        return np.vstack([psi[np.all(np.isfinite(psi), axis=1)], self.neighbours(w)])
+
+    def neighbours(self, w: Array) -> Array:
+        """Training poses (n_neighbors, 3) of the training images nearest to ``w`` (m,)."""
         reg = self.localizer.regressor_
         ws = ((w - reg.w_mean_) / reg.w_scale_)[None]
-        idx = self._retrieval.kneighbors(ws, return_distance=False)[0]
-        psi = self.localizer.measure(w, "pose")[None]
-        return np.vstack([psi[np.all(np.isfinite(psi), axis=1)], self.train_poses[idx]])
+        return self.train_poses[self._retrieval.kneighbors(ws, return_distance=False)[0]]
+
+    def agreement(self, w: Array, pose: Array, radius: float, heading_scale: float) -> float:
+        """Share (float in [0, 1]) of the image's retrieved neighbours within ``radius`` of
+        ``pose`` (3,) in the metric ``dx^2 + dy^2 + (heading_scale dyaw)^2``: near 1 when
+        the image points at ``pose`` alone, about 1 / (number of twins) when it looks the
+        same in several places."""
+        d = self.neighbours(w) - pose
+        d2 = d[:, 0] ** 2 + d[:, 1] ** 2 + (heading_scale * wrap_angle(d[:, 2])) ** 2
+        return float(np.mean(d2 < radius ** 2))
 
     def jitter(self, centres: Array, n: int, rng: np.random.Generator) -> Array:
         """``n`` poses (n, 3): centres (k, 3) drawn with replacement plus body-frame noise."""

@@ -124,6 +124,26 @@ def test_dominant_mode_summary_of_two_modes_is_the_heavier_one(localizer, featur
     assert hyp["weights"][0] > 0.6 and hyp["means"].shape[1] == 3
 
 
+def test_image_seeded_modes_stay_ambiguous_until_an_image_agrees(localizer, features):
+    """A hypothesis seeded from images may be a place that merely looks alike: the status
+    says "ambiguous" until an image's retrieved neighbours agree with it."""
+    W, poses, _ = features
+    k = 20  # its image's neighbours agree (7 of 10 within 1 m); the drive's first do not
+    far = int(np.argmax(np.hypot(*(poses[:, :2] - poses[k, :2]).T) > 3.0))
+    pf = _belief(localizer, max_injection=0.0, track_mode=False)
+    pf.reset(W[k], x0=poses[k])
+    assert pf.confirmed  # a given start pose needs no image to confirm it
+    rng = np.random.default_rng(2)
+    pf.confirmed = False  # as after an injection
+    for centre, confirmed in ((poses[far], False), (poses[far], False), (poses[k], False),
+                              (poses[k], True)):  # confirm_steps=2 agreeing frames in a row
+        pf._set(centre + rng.normal(0.0, [0.05, 0.05, 0.01], (pf.n_particles, 3)))
+        _, status = pf.step([0.0, 0.0], W[k])
+        assert pf.confirmed is confirmed
+        assert status == ("tracking" if confirmed else "ambiguous")
+    assert pf._proposals.agreement(W[k], poses[far], 1.0, 2.0) == 0.0
+
+
 def test_heading_mean_near_pi_is_on_the_circle():
     rng = np.random.default_rng(0)
     yaw = wrap_angle(np.pi + rng.normal(0.0, 0.05, 2000))  # half near +pi, half near -pi
@@ -171,6 +191,9 @@ def test_tracks_the_drive_it_was_fitted_with(localizer, features):
     ({"max_injection": 1.5}, ValueError, "max_injection"),
     ({"sample_free": 3}, TypeError, "sample_free"),
     ({"proposal_noise": np.eye(2)}, ValueError, "proposal_noise"),
+    ({"confirm_share": 1.5}, ValueError, "confirm_share"),
+    ({"confirm_steps": 0}, ValueError, "confirm_steps"),
+    ({"max_modes": 0}, ValueError, "max_modes"),
 ])
 def test_bad_arguments_raise_clear_errors(localizer, kwargs, error, match):
     with pytest.raises(error, match=match):
