@@ -15,20 +15,8 @@ log-weights ``l_i``; with the names of the code::
 
 (k the localizer's ``control_gain_``, a its calibrated ``consistency(measurement)``;
 the averages: :mod:`localization.filtering.augmented_mcl`).
-The squared Mahalanobis distance ``d2_i`` of the measurement at particle ``X_i`` follows
-the localizer's three measurement models (R as in ``localizer.measurement_model``):
-
-- "representation": ``e_i = H_i^-1 (r*(w) - R*(theta_i))``, ``H_i = dR*/dtheta`` at
-  ``theta_i``, ``d2_i = e_b^T R^-1 e_b`` with ``e_b = T(yaw_i)^T e_i`` and R the body-frame
-  pose noise of the model: the same as ``y^T (H T R T^T H^T)^-1 y`` (R* and H of all
-  particles in one batched query; the Jacobian determinant is left out: a near-singular
-  H would otherwise lift far particles above the truth);
-- "pose": ``e_b = T(yaw_i)^T wrap(psi*(w) - theta_i)``, ``d2_i = e_b^T R^-1 e_b``;
-- "features": ``d2_i = (w - Phi*(theta_i))^T R^-1 (w - Phi*(theta_i))``.
-
-Outliers are capped at the gate (an aliased image moves every weight alike) and particles
-where the GSE maps are undefined (NaN: out of the training domain) get that floor, never
-NaN. Proposals of an image (Augmented MCL's injections, the start): psi*(w) and the
+``d2_i`` and ``L_i``: :mod:`localization.filtering.particle_likelihood` (outliers capped at the
+gate, never NaN). Proposals of an image (Augmented MCL's injections, the start): psi*(w) and the
 training poses of the ``n_neighbors`` nearest training images in feature space, jittered by
 ``proposal_noise`` (body frame). ``pose_mean`` / ``pose_cov`` describe the heaviest mode
 (:mod:`localization.filtering._modes`), never the average of distant modes.
@@ -43,7 +31,6 @@ import numpy as np
 from filterpy.monte_carlo import systematic_resample
 from numpy.typing import ArrayLike
 from scipy.special import logsumexp
-from scipy.stats import chi2
 from sklearn.exceptions import NotFittedError
 
 from localization._validation import check_int, check_real
@@ -52,16 +39,16 @@ from localization.filtering.augmented_mcl import LikelihoodAverages
 from localization.filtering.image_proposals import ImageProposals
 from localization.filtering.measurement_noise import inflate
 from localization.filtering.mode_tracker import make_tracker
+from localization.filtering.particle_likelihood import MEASUREMENTS, ParticleLikelihood
 from localization.filtering.particle_motion import (
     is_unicycle,
     predict_particles,
     sample_body_noise,
 )
-from localization.geometry import Array, to_body, wrap_angle
+from localization.geometry import Array, wrap_angle
 
 __all__ = ["PARTICLE_STATUSES", "ParticleBelief"]
 
-MEASUREMENTS = ("pose", "features", "representation")
 RESET_MODES = ("image", "global")
 #: "initial" after reset; "out_of_domain": the image has no measurement (weights kept);
 #: "lost": w_fast < lost_ratio w_slow (the images are far less likely than usual);
@@ -154,8 +141,6 @@ class ParticleBelief:
             raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
         if isinstance(n_particles, bool) or int(n_particles) != n_particles or n_particles < 1:
             raise ValueError(f"n_particles must be a positive integer, got {n_particles}")
-        if not 0.0 < gate_probability < 1.0:
-            raise ValueError(f"gate_probability must be in (0, 1), got {gate_probability}")
         if int(n_neighbors) < 1:
             raise ValueError(f"n_neighbors must be >= 1, got {n_neighbors}")
         if sample_free is not None and not callable(sample_free):
@@ -188,14 +173,9 @@ class ParticleBelief:
         self.Q = inflate(localizer.process_noise_body_, self.alpha)
         self.gain = np.asarray(localizer.control_gain_, dtype=np.float64)
         self._unicycle = is_unicycle(motion_model)
-        reg = localizer.regressor_
-        self._m = len(reg.w_mean_)
-        if measurement == "features":
-            R, dof = localizer.noise_["features"] * float(np.mean(self.alpha)), self._m
-        else:
-            R, dof = inflate(localizer.noise_[measurement], self.alpha), 3
-        self.R, self.gate = R, float(chi2.ppf(gate_probability, dof))
-        self._R_inv = np.linalg.inv(R)
+        self._m = len(localizer.regressor_.w_mean_)
+        self.likelihood = ParticleLikelihood(localizer, measurement, self.alpha, gate_probability)
+        self.R, self.gate = self.likelihood.R, self.likelihood.gate
         self.proposal_noise = np.asarray(localizer.noise_["representation"] if proposal_noise
                                          is None else proposal_noise, dtype=np.float64)
         if self.proposal_noise.shape != (3, 3):
@@ -340,23 +320,8 @@ class ParticleBelief:
         ``localizer.measure(w, measurement)``) at the particles ``X`` (default the current
         ones); NaN where the maps are undefined."""
         w = self._check_w(w)
-        loc, reg = self.localizer, self.localizer.regressor_
-        X = self.particles if X is None else np.asarray(X, dtype=np.float64)
-        z = loc.measure(w, self.measurement) if z is None else z
-        if self.measurement == "features":
-            e = z - reg.predict_features(loc.to_model(X))
-            return np.einsum("ni,ij,nj->n", e, self._R_inv, e)
-        if self.measurement == "pose":
-            e = z[None] - X
-        else:
-            r = z
-            Rstar, H = reg.embed_pose_with_jacobian(loc.to_model(X))
-            e = np.full_like(X, np.nan)
-            ok = np.all(np.isfinite(H), axis=(1, 2)) & np.all(np.isfinite(r))
-            ok[ok] &= np.abs(np.linalg.det(H[ok])) > 1e-12
-            e[ok] = np.linalg.solve(H[ok], (r[None] - Rstar[ok])[..., None])[..., 0]
-        eb = to_body(e, X[:, 2])
-        return np.einsum("ni,ij,nj->n", eb, self._R_inv, eb)
+        z = self.likelihood.measure(w) if z is None else z
+        return self.likelihood.distances(z, self.particles if X is None else X)
 
     def step(self, u: ArrayLike, w: ArrayLike) -> tuple[float, str]:
         """Predict with the commanded control ``u`` (2,), weight with the features ``w``,
@@ -378,7 +343,7 @@ class ParticleBelief:
             self.status = "out_of_domain"
             self._track(u, w)
             return np.nan, self.status
-        log_L = -0.5 * np.minimum(np.nan_to_num(self.distances(w, z=z), nan=np.inf), self.gate)
+        log_L = self.likelihood.log_likelihood(z, self.particles)
         old = self.log_weights[~self._fresh] if (~self._fresh).any() else self.log_weights
         w_avg = float(np.exp(logsumexp(old + log_L[~self._fresh] if (~self._fresh).any()
                                        else old + log_L) - logsumexp(old)))
