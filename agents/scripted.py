@@ -14,12 +14,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.planner import PlannedPath, StreetPlanner, check_city_point
+from agents.planner import PlannedPath, StreetPlanner, check_city_point, round_corners
 from envs.driving import bearing, pursuit_turn_rate
 from localization._validation import check_array, check_real
 from localization.geometry import Array
 
-__all__ = ["BELIEF_KEYS", "SLOW_STATUSES", "STOP_STATUSES", "Navigator", "ScriptedAgent",
+__all__ = ["BELIEF_KEYS", "PLANS", "SLOW_STATUSES", "STOP_STATUSES", "Navigator", "ScriptedAgent",
            "check_belief_observation", "pure_pursuit"]
 
 BELIEF_KEYS = ("pose_mean", "pose_cov", "goal")
@@ -70,22 +70,33 @@ def pure_pursuit(pose: Array, carrot: Array, remaining: float, speed: float, w_m
     return np.array([v, w])
 
 
+#: the kinds of plan a :class:`Navigator` makes
+PLANS = ("drive", "shortest")
+
+
 class Navigator:
     """The plan to the current goal and the progress along it, from belief means.
 
-    Plans are car-like (:meth:`agents.planner.StreetPlanner.drive`: lanes and rounded corners,
-    no U-turns), the kind of driving the localizer was trained on. A new goal starts a new
-    plan; the plan is also redone from the belief mean when the mean is farther than
+    ``plan="drive"`` (the default) plans like a car (:meth:`agents.planner.StreetPlanner.drive`:
+    lanes and rounded corners, no U-turns), the kind of driving a lane-trained localizer
+    knows. ``plan="shortest"`` takes the shortest street path
+    (:meth:`~agents.planner.StreetPlanner.plan`, corners rounded the same way: U-turns
+    anywhere, turning on the spot where the path doubles back), for a localizer trained on the whole street surface at
+    every heading (``fit_city_localizer(lanes="free")``). A new goal starts a new plan; the
+    plan is also redone from the belief mean when the mean is farther than
     ``replan_distance`` from it (after a belief correction, say).
 
     Parameters
     ----------
     city : envs.scene.City — the map.
     replan_distance : float — metres off the path that trigger a new plan.
+    plan : {"drive", "shortest"}
     """
 
-    def __init__(self, city: Any, replan_distance: float = 1.0) -> None:
-        self.planner = StreetPlanner(city)
+    def __init__(self, city: Any, replan_distance: float = 1.0, plan: str = "drive") -> None:
+        if plan not in PLANS:
+            raise ValueError(f"unknown plan {plan!r}; choose one of {PLANS}")
+        self.planner, self.plan = StreetPlanner(city), plan
         self.replan_distance = check_real(replan_distance, "replan_distance", low=0.0, low_open=True)
         self.reset()
 
@@ -111,7 +122,9 @@ class Navigator:
         if new_goal or self.path.distance_to(pose[:2]) > self.replan_distance:
             self.replans += not new_goal
             self.goal = np.array(goal, dtype=np.float64)
-            self.path = PlannedPath(self.planner.drive(pose, goal))
+            self.path = PlannedPath(self.planner.drive(pose, goal) if self.plan == "drive" else
+                                    round_corners(self.planner.plan(pose[:2], goal),
+                                                  self.planner.turn_radius))
         self.path.update(pose[:2])
         return self.path
 
@@ -128,6 +141,8 @@ class ScriptedAgent:
     w_max : float — bound on the angular velocity command (rad/s).
     turn_in_place : float — heading error (rad) above which the robot turns on the spot.
     replan_distance : float — see :class:`Navigator`.
+    plan : {"drive", "shortest"} — car-like lane plans, or the shortest street path with
+        turns on the spot (:class:`Navigator`).
 
     Notes
     -----
@@ -143,8 +158,8 @@ class ScriptedAgent:
 
     def __init__(self, city: Any, lookahead: float = 0.6, speed: float = 0.9, w_max: float = 1.0,
                  turn_in_place: float = 0.6, replan_distance: float = 1.0,
-                 look_rate: float = 0.5, slow_factor: float = 0.5) -> None:
-        self.navigator = Navigator(city, replan_distance)
+                 look_rate: float = 0.5, slow_factor: float = 0.5, plan: str = "drive") -> None:
+        self.navigator = Navigator(city, replan_distance, plan)
         self.look_rate = check_real(look_rate, "look_rate", low=0.0)
         self.slow_factor = check_real(slow_factor, "slow_factor", low=0.0, high=1.0)
         self.lookahead, self.speed, self.w_max, self.turn_in_place = (

@@ -131,6 +131,7 @@ for name in ("lookahead", "speed", "w_max", "turn_in_place", "replan_distance"):
         CASES.append(Case(f"scripted-{name}-{i}",
                           lambda ctx, n=name, b=bad: ScriptedAgent(ctx.city, **{n: b}), exc, name))
 CASES.append(Case("navigator-replan", lambda ctx: Navigator(ctx.city, 0.0), V, "replan_distance"))
+CASES.append(Case("scripted-plan", lambda ctx: ScriptedAgent(ctx.city, plan="teleport"), V, "plan"))
 for i, (bad, exc, m) in enumerate([
         ([1, 2, 3], T, "observation"), (None, T, "observation"), ("obs", T, "observation"),
         ({"image": np.zeros((16, 16, 3))}, V, "pose_mean"),
