@@ -86,7 +86,9 @@ class NoiseModelMixin:
 
         1. control gains and Q from the controls (:meth:`fit_process_noise`);
         2. R of each model from the residuals of its measurements at the true poses:
-           robust covariance, inflated per component by the residuals' correlation time.
+           robust covariance, inflated per component by the residuals' correlation time;
+           the heteroscedastic scales (``noise_scale_``, from :meth:`fit`'s K-fold
+           residuals) are rescaled to average 1 over the drive's frames.
 
         Resets the consistency calibration (:meth:`calibrate`) and the quality report
         (``quality_``).
@@ -104,8 +106,10 @@ class NoiseModelMixin:
         self._check_fitted()
         images, poses, controls = self._check_drive(images, poses, controls)
         self.fit_process_noise(motion_model, poses, controls)
-        self._set_noise(self._residuals(self.regressor_, self.transform(images), poses),
-                        sequence=True)
+        W = self.transform(images)
+        self._set_noise(self._residuals(self.regressor_, W, poses), sequence=True)
+        for model in getattr(self, "noise_scale_", {}).values():  # the drive's level
+            model.normalize(poses, self._geometry(model, poses, W))
         self.consistency_ = {}
         self.quality_ = {}  # it described the previous noise model
         return self
@@ -180,8 +184,8 @@ class NoiseModelMixin:
     def _k_fold_residuals(self, W: Array, poses: Array
                           ) -> tuple[dict[str, Array], Array, Array]:
         """Held-out residuals of K-fold refits (the features are fitted once on all images:
-        unsupervised, they see no pose), their poses (n, 3) and the local geometry (n, 4) of
-        each fold's maps there (:meth:`HeteroscedasticNoise.geometry`).
+        unsupervised, they see no pose), their poses (n, 3) and the local geometry (n, 5) of
+        each fold's maps there with the images' novelty (:meth:`HeteroscedasticNoise.geometry`).
 
         A fold holds fewer samples than the fit; where its neighbourhood graph falls apart
         (25 samples of a corner apart from 6375 on city 12, even with 20 neighbours) the fold
@@ -203,7 +207,8 @@ class NoiseModelMixin:
                 parts[k].append(e)
             held.append(poses[test])
             geometry.append(model.geometry(model.density_index(poses[train]), poses[test],
-                                           reg.embed_pose_jacobian(self._to_model(poses[test]))))
+                                           reg.embed_pose_jacobian(self._to_model(poses[test])),
+                                           novelty(reg, W[test])))
         if failed:
             if len(held) < 2:
                 raise ValueError(f"noise_folds={self.noise_folds}: fewer than two folds could "
@@ -214,9 +219,11 @@ class NoiseModelMixin:
                 np.concatenate(geometry))
 
     # ------------------------------------------------- heteroscedastic noise
-    def noise_scale(self, poses: ArrayLike, measurement: str) -> Array:
-        """The heteroscedastic scale ``s(theta)`` (n,) of the model's R at world poses (n, 3):
-        ``R_body(theta) = s(theta) R_body``; NaN where the GSE maps have no value.
+    def noise_scale(self, poses: ArrayLike, measurement: str, W: ArrayLike | None = None
+                    ) -> Array:
+        """The heteroscedastic scale ``s(theta, w)`` (n,) of the model's R at world poses
+        (n, 3) for images of features W (n, m) (None: typical frames):
+        ``R_body(theta) = s(theta, w) R_body``; NaN where the GSE maps have no value.
 
         Raises
         ------
@@ -225,19 +232,28 @@ class NoiseModelMixin:
         """
         model = self._noise_scale_model(measurement)
         poses = check_array(poses, "poses", shape=(None, 3), finite=False, what="[x, y, yaw]")
+        return model.scale(poses, self._geometry(model, poses, W))
+
+    def _geometry(self, model: HeteroscedasticNoise, poses: Array, W: ArrayLike | None
+                  ) -> Array:
+        """:meth:`HeteroscedasticNoise.geometry` (n, 5) of the fitted maps at world poses
+        (n, 3) with images of features W (n, m) (None: typical frames)."""
         J = self.regressor_.embed_pose_jacobian(self._to_model(np.nan_to_num(poses)))
         J[~np.all(np.isfinite(poses), axis=1)] = np.nan
-        return model.scale(poses, model.geometry(self._density_index(model), poses, J))
+        u = None if W is None else novelty(self.regressor_, check_array(
+            W, "W", shape=(len(poses), None)))
+        return model.geometry(self._density_index(model), poses, J, u)
 
     def measurement_noise(self, poses: ArrayLike, measurement: str,
-                          alpha: ArrayLike | None = None) -> Array:
+                          alpha: ArrayLike | None = None, W: ArrayLike | None = None) -> Array:
         """Heteroscedastic R(theta) at world poses (n, 3): (n, 3, 3) world-frame pose-error
         covariances ``T(yaw) s(theta) R_body T(yaw)^T`` for "pose" and "representation"
         (the representation model's R is ``H R(theta) H^T``), (n, m, m) ``s(theta) R`` for
-        "features"; R_body inflated by ``alpha`` (default the calibrated consistency). NaN
-        matrices where the maps have no value; symmetric positive definite elsewhere."""
+        "features"; R_body inflated by ``alpha`` (default the calibrated consistency); W as
+        :meth:`noise_scale`. NaN matrices where the maps have no value; symmetric positive
+        definite elsewhere."""
         alpha = self.consistency(measurement) if alpha is None else check_alpha(alpha)
-        s = self.noise_scale(poses, measurement)
+        s = self.noise_scale(poses, measurement, W)
         if measurement == "features":
             return scaled_covariance(self.noise_["features"] * float(np.mean(alpha)), s)
         R = scaled_covariance(inflate(self.noise_[measurement], alpha), s)
@@ -264,11 +280,12 @@ class NoiseModelMixin:
             self._density_cache = cache
         return cache[1]
 
-    def _heteroscedastic_model(self, measurement: str, alpha: Array) -> FunctionMeasurement:
+    def _heteroscedastic_model(self, measurement: str, alpha: Array) -> HeteroscedasticMeasurement:
         """``measurement_model(measurement, alpha, noise="heteroscedastic")``: the global
-        model's h, H and residual with ``R(x) = s(x) R`` (s of the pose model: its largest
-        value ``max_scale`` where the maps have no value; the other two models have no H
-        there)."""
+        model's h, H and residual with ``R(x) = s(x, w) R`` for the image last passed to
+        ``observe(w)`` (a typical frame before) and ``gate_R(x) = s(x) R`` (a typical frame:
+        the NIS gate does not widen for an unfamiliar image). Where the maps have no value
+        the pose model takes s = ``max_scale``; the other two models have no H there."""
         model = self._noise_scale_model(measurement)
         reg, to_model = self.regressor_, self._to_model
         index = self._density_index(model)
@@ -279,25 +296,55 @@ class NoiseModelMixin:
                 cache["x"], cache["J"] = np.array(x), reg.embed_pose_jacobian(to_model(x))[0]
             return cache["J"]
 
-        def s(x: Array) -> float:
+        def s(x: Array, image: bool = True) -> float:
             x = np.asarray(x, dtype=np.float64).reshape(1, 3)
-            v = float(model.scale(x, model.geometry(index, x, J(x[0])[None]))[0])
+            u = None if out.novelty is None or not image else np.array([out.novelty])
+            v = float(model.scale(x, model.geometry(index, x, J(x[0])[None], u))[0])
             return v if np.isfinite(v) else float(model.max_scale)
 
         if measurement == "features":
             Rf = self.noise_["features"] * float(np.mean(alpha))
-            return FunctionMeasurement(h=lambda x: reg.predict_features(to_model(x))[0],
-                                       H=lambda x: reg.features_jacobian(to_model(x))[0],
-                                       R=lambda x: s(x) * Rf)
+            out = HeteroscedasticMeasurement(
+                reg, h=lambda x: reg.predict_features(to_model(x))[0],
+                H=lambda x: reg.features_jacobian(to_model(x))[0], R=lambda x: s(x) * Rf,
+                gate_R=lambda x: s(x, False) * Rf)
+            return out
         Rb = inflate(self.noise_[measurement], alpha)
         if measurement == "pose":
-            return FunctionMeasurement(h=lambda x: np.array(x, dtype=np.float64),
-                                       H=lambda x: np.eye(3),
-                                       R=lambda x: body_to_world(s(x) * Rb, float(x[2])),
-                                       residual=pose_residual)
+            out = HeteroscedasticMeasurement(
+                reg, h=lambda x: np.array(x, dtype=np.float64), H=lambda x: np.eye(3),
+                R=lambda x: body_to_world(s(x) * Rb, float(x[2])), residual=pose_residual,
+                gate_R=lambda x: body_to_world(s(x, False) * Rb, float(x[2])))
+            return out
 
-        def R_rep(x: Array) -> Array:
+        def R_rep(x: Array, image: bool = True) -> Array:
             Hx = J(x)
-            return Hx @ body_to_world(s(x) * Rb, float(x[2])) @ Hx.T
+            return Hx @ body_to_world(s(x, image) * Rb, float(x[2])) @ Hx.T
 
-        return FunctionMeasurement(h=lambda x: reg.embed_pose(to_model(x))[0], H=J, R=R_rep)
+        out = HeteroscedasticMeasurement(reg, h=lambda x: reg.embed_pose(to_model(x))[0], H=J,
+                                         R=R_rep, gate_R=lambda x: R_rep(x, False))
+        return out
+
+
+def novelty(reg: GSERegressor, W: Array) -> Array:
+    """Distance (n,) of features W (n, m) from the learned feature manifold,
+    ``|w - g_u(r*(w))|`` (reduce-then-recover; NaN out of the domain): large for an image
+    unlike every training image (another light, an occluder)."""
+    return np.linalg.norm(W - reg.reconstruct(W), axis=1)
+
+
+class HeteroscedasticMeasurement(FunctionMeasurement):
+    """A :class:`FunctionMeasurement` whose R(x) also depends on the current image:
+    :meth:`observe` sets its novelty (the belief filter calls it before each update);
+    ``gate_R(x)``, the R of a typical image, is what the EKF's NIS gate uses."""
+
+    def __init__(self, regressor: GSERegressor, gate_R: Any, **model: Any) -> None:
+        super().__init__(**model)
+        self._regressor = regressor
+        self.gate_R = gate_R
+        self.novelty: float | None = None
+
+    def observe(self, w: ArrayLike) -> None:
+        """The features w (m,) of the image of the next update."""
+        u = float(novelty(self._regressor, np.asarray(w, dtype=np.float64).reshape(1, -1))[0])
+        self.novelty = u if np.isfinite(u) else None

@@ -291,6 +291,7 @@ class BeliefFilter:
         prior, kept, forced = self.ekf, (self.misses, self.gated), self._forced
         self._start(x0, P0)
         z = self.localizer.measure(w, self.measurement)
+        self._observe(w)
         try:
             ok = bool(np.all(np.isfinite(z))) and self.ekf.update(z, self.model).accepted
         except OutOfDomainError:
@@ -313,11 +314,19 @@ class BeliefFilter:
         lost = self._lost_now or self.misses >= LOST_AFTER_MISSES
         self.belief_status = "lost" if lost else "tracking"
 
+    def _observe(self, w: Array) -> None:
+        """Tell a measurement model whose R depends on the image (``observe(w)``, e.g. the
+        heteroscedastic one) which image the next update uses."""
+        observe = getattr(self.model, "observe", None)
+        if callable(observe):
+            observe(w)
+
     def _update(self, w: Array) -> tuple[float, str]:
         assert self.ekf is not None
         z = self.localizer.measure(w, self.measurement)
         if not np.all(np.isfinite(z)):
             return np.nan, "out_of_domain"
+        self._observe(w)
         try:
             self.last_update = self.ekf.update(z, self.model)
         except OutOfDomainError:

@@ -9,24 +9,32 @@ regressed on the local geometry of the maps at their poses, and R is scaled by t
     R_body(theta) = s(theta) R_body,          R(theta) = T(yaw) R_body(theta) T(yaw)^T
 
     y_i      = min(e_i^T R_body^-1 e_i, c) / k              (k = dim e, c = chi2_k 99.7 %)
-    g(theta) = [log(d(theta) / d_ref), log sv_1..3 (dR*/dtheta)(theta), log n(theta)]
-    E[y | theta] = exp(b0 + b^T g(theta))                     (Gamma GLM, log link)
-    s(theta) = clip(exp(b0 + b^T g(theta)) / m, min_scale, max_scale)
+    g        = [log(d(theta) / d_ref), log sv_1..3 (dR*/dtheta)(theta), log(u(w) / u_ref),
+                log n(theta)]
+    E[y | theta, w] = exp(b0 + b^T g)                          (Gamma GLM, log link)
+    s(theta, w) = clip(exp(b0 + b^T g) / m, min_scale, max_scale)
 
 - ``d(theta)``: distance to the ``density_neighbors``-th nearest training pose (in
   ``(x, y, L cos yaw, L sin yaw)``, ``L = heading_scale`` metres per radian), ``d_ref`` its
   median over the held-out poses. For a K-fold residual it is measured to that fold's
   training poses: the sample that made the map it was predicted with.
 - ``sv``: the singular values of the Jacobian of R* (the maps' steepness and conditioning).
+- ``u(w)``: the image's novelty, the distance of its features w from the learned manifold
+  (``|w - g_u(r*(w))|``, reduce-then-recover), ``u_ref`` its median over the held-out
+  images: an unfamiliar frame (another light, an occluder) lies off the manifold of the
+  training images and its R grows. Learned from held-out daylight images only; a query
+  without an image (``novelty=None``) counts as a typical frame (``u = u_ref``).
 - ``n(theta)``: the held-out scores ``y`` of the ``n_neighbors`` nearest held-out poses,
   averaged with ``prior_weight`` pseudo-scores at their mean and divided by that mean (a
   kNN smoother shrunk to 1; without the pose itself during the fit).
-- Bounds: the density and neighbour coefficients are >= 0 (the neighbours' <= 1), so R
-  never shrinks where the sample thins out; gross errors are clipped at ``c`` (the gate
+- Bounds: the density, novelty and neighbour coefficients are >= 0 (the neighbours' <= 1),
+  so R never shrinks where the sample thins out or the image is less familiar; gross errors are clipped at ``c`` (the gate
   rejects them at run time, as for the global R).
 - ``m``: the mean of ``exp(b0 + b^T g)`` over the held-out poses, so ``s`` averages 1 there:
   the level stays the global R's (its correlation-time inflation and the consistency
-  calibration still apply); only its distribution over the map is learned.
+  calibration still apply); only its distribution over the map is learned. When the global
+  R comes from a recorded drive, :meth:`HeteroscedasticNoise.normalize` makes ``s`` average
+  1 over that drive's frames instead.
 
 ``s > 0`` times an SPD matrix, with an eigenvalue floor (:func:`scaled_covariance`), is SPD
 by construction. Where the maps have no value (``dR*/dtheta`` is NaN: out of the training
@@ -147,9 +155,9 @@ class HeteroscedasticNoise:
     Attributes
     ----------
     poses_ : (n, 3) held-out poses; scores_ : (n,) their scores y.
-    coef_ : (p + 1,) intercept and coefficients of [log d, log sv (3), log n].
+    coef_ : (p + 1,) intercept and coefficients of [log d, log sv (3), log u, log n] (p = 6).
     center_, spread_ : (p,) standardisation of the features.
-    density_ref_ : float, d_ref (metres); level_ : float, m.
+    density_ref_ : float, d_ref (metres); novelty_ref_ : float, u_ref; level_ : float, m.
     """
 
     def __init__(self, n_neighbors: int = 20, density_neighbors: int = 5,
@@ -190,28 +198,36 @@ class HeteroscedasticNoise:
                              f"{self.density_neighbors} poses, got {len(pts)}")
         return NearestNeighbors(n_neighbors=int(self.density_neighbors)).fit(pts)
 
-    def geometry(self, index: NearestNeighbors, poses: ArrayLike, jacobians: ArrayLike
-                 ) -> Array:
-        """Local features (n, 4) ``[d, sv_1, sv_2, sv_3]`` at poses (n, 3): the density distance
-        to the training poses of ``index`` (:meth:`density_index`) and the singular values of
-        the Jacobians (n, q, 3) of R*; NaN rows where a pose or Jacobian is not finite."""
+    def geometry(self, index: NearestNeighbors, poses: ArrayLike, jacobians: ArrayLike,
+                 novelty: ArrayLike | None = None) -> Array:
+        """Local features (n, 5) ``[d, sv_1, sv_2, sv_3, u]`` at poses (n, 3): the density
+        distance to the training poses of ``index`` (:meth:`density_index`), the singular
+        values of the Jacobians (n, q, 3) of R* and the images' novelty u (n,) (None: a
+        typical frame, NaN in the last column until fitted); NaN rows where a pose or
+        Jacobian is not finite."""
         pts = pose_points(poses, float(self.heading_scale))
         J = check_array(jacobians, "jacobians", ndim=3, finite=False)
         if len(J) != len(pts) or J.shape[2] != 3:
             raise ValueError(f"jacobians must have shape ({len(pts)}, q, 3), got {J.shape}")
-        out = np.full((len(pts), 4), np.nan)
+        out = np.full((len(pts), 5), np.nan)
         ok = np.all(np.isfinite(pts), axis=1) & np.all(np.isfinite(J), axis=(1, 2))
         if ok.any():
             dist, _ = index.kneighbors(pts[ok])
             sv = np.linalg.svd(J[ok], compute_uv=False)
             out[ok, 0] = dist[:, -1]
-            out[ok, 1:1 + sv.shape[1]] = sv[:, :3]
+            out[ok, 1:1 + min(sv.shape[1], 3)] = sv[:, :3]
+        if novelty is None:
+            out[ok, 4] = getattr(self, "novelty_ref_", np.nan)
+        else:
+            u = check_array(novelty, "novelty", shape=(len(pts),), finite=False)
+            out[ok, 4] = u[ok]
         return out
 
     def _design(self, geometry: Array, neighbours: Array) -> Array:
         d = np.maximum(geometry[:, :1], 1e-6 * self.density_ref_) / self.density_ref_
-        sv = np.maximum(geometry[:, 1:], 1e-12)
-        return np.log(np.column_stack([d, sv, neighbours]))
+        sv = np.maximum(geometry[:, 1:4], 1e-12)
+        u = np.maximum(geometry[:, 4:], 1e-6 * self.novelty_ref_) / self.novelty_ref_
+        return np.log(np.column_stack([d, sv, u, neighbours]))
 
     def _neighbours(self, poses: Array, exclude_self: bool) -> Array:
         """The smoother ``n(theta)`` (n,) at poses (rows must be finite)."""
@@ -233,13 +249,13 @@ class HeteroscedasticNoise:
         residuals : (n, k) held-out residuals (NaN rows allowed: left out).
         poses : (n, 3) their true poses.
         covariance : (k, k) the global R they are scored against.
-        geometry : (n, 4) :meth:`geometry` at the poses (for K-fold residuals: against each
-            fold's training poses).
+        geometry : (n, 5) :meth:`geometry` at the poses with the images' novelty (for K-fold
+            residuals: against each fold's training poses and maps).
         """
         self._check_params()
         e = check_array(residuals, "residuals", ndim=2, finite=False)
         poses = check_array(poses, "poses", shape=(len(e), 3), what="[x, y, yaw]")
-        geometry = check_array(geometry, "geometry", shape=(len(e), 4), finite=False)
+        geometry = check_array(geometry, "geometry", shape=(len(e), 5), finite=False)
         y = squared_scores(e, covariance, float(self.clip_probability))
         ok = np.isfinite(y) & np.all(np.isfinite(geometry), axis=1) & (y > 0)
         need = max(20, 2 * int(self.n_neighbors))
@@ -249,28 +265,43 @@ class HeteroscedasticNoise:
         self.poses_, self.scores_, geometry = poses[ok], y[ok], geometry[ok]
         self._index = NearestNeighbors().fit(pose_points(self.poses_, float(self.heading_scale)))
         self.density_ref_ = float(np.median(geometry[:, 0]))
+        self.novelty_ref_ = float(max(np.median(geometry[:, 4]), 1e-12))
         X = self._design(geometry, self._neighbours(self.poses_, exclude_self=True))
         self.center_, self.spread_ = X.mean(axis=0), np.maximum(X.std(axis=0), 1e-9)
         self.center_[0] = 0.0  # log(d / d_ref): keep the median density at 0
         Xs = (X - self.center_) / self.spread_
-        bounds = [(0.0, None), (None, None), (None, None), (None, None),
+        bounds = [(0.0, None), (None, None), (None, None), (None, None), (0.0, None),
                   (0.0, float(self.spread_[-1]))]  # exponent of n(theta) in [0, 1]
         self.coef_ = fit_log_gamma(Xs, self.scores_, bounds, float(self.ridge))
         self.level_ = 1.0
         self.level_ = float(np.mean(self._relative(X)))
         return self
 
+    def normalize(self, poses: ArrayLike, geometry: ArrayLike) -> Self:
+        """Rescale so that ``s`` (before its clip) averages 1 over these poses and images
+        (e.g. the drive the global R was estimated on: that drive then sets the level, as
+        it does for the global R)."""
+        self._check_fitted()
+        poses = check_array(poses, "poses", shape=(None, 3), finite=False, what="[x, y, yaw]")
+        geometry = check_array(geometry, "geometry", shape=(len(poses), 5), finite=False)
+        ok = np.all(np.isfinite(geometry), axis=1) & np.all(np.isfinite(poses), axis=1)
+        if not ok.any():
+            raise ValueError("normalize: no pose with finite geometry")
+        X = self._design(geometry[ok], self._neighbours(poses[ok], exclude_self=False))
+        self.level_ *= float(np.mean(self._relative(X)))
+        return self
+
     def _relative(self, X: Array) -> Array:
-        """``exp(b0 + b^T g) / m`` (n,) of design rows X (n, 5)."""
+        """``exp(b0 + b^T g) / m`` (n,) of design rows X (n, 6)."""
         return np.exp(self.coef_[0] + ((X - self.center_) / self.spread_) @ self.coef_[1:]) \
             / self.level_
 
     def scale(self, poses: ArrayLike, geometry: ArrayLike) -> Array:
-        """``s(theta)`` (n,) at poses (n, 3) with their :meth:`geometry` (n, 4); NaN where the
-        geometry is NaN (the maps have no value there)."""
+        """``s(theta, w)`` (n,) at poses (n, 3) with their :meth:`geometry` (n, 5); NaN where
+        the geometry is NaN (the maps have no value there)."""
         self._check_fitted()
         poses = check_array(poses, "poses", shape=(None, 3), finite=False, what="[x, y, yaw]")
-        geometry = check_array(geometry, "geometry", shape=(len(poses), 4), finite=False)
+        geometry = check_array(geometry, "geometry", shape=(len(poses), 5), finite=False)
         out = np.full(len(poses), np.nan)
         ok = np.all(np.isfinite(geometry), axis=1) & np.all(np.isfinite(poses), axis=1)
         if ok.any():
@@ -289,7 +320,7 @@ class HeteroscedasticNoise:
         return {"params": np.array([float(getattr(self, k)) for k in PARAMS]),
                 "poses": self.poses_, "scores": self.scores_, "coef": self.coef_,
                 "center": self.center_, "spread": self.spread_,
-                "reference": np.array([self.density_ref_, self.level_])}
+                "reference": np.array([self.density_ref_, self.novelty_ref_, self.level_])}
 
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> HeteroscedasticNoise:
@@ -305,10 +336,10 @@ class HeteroscedasticNoise:
         model._check_params()
         model.poses_ = check_array(state["poses"], "poses", shape=(None, 3))
         model.scores_ = check_array(state["scores"], "scores", shape=(len(model.poses_),))
-        model.coef_ = check_array(state["coef"], "coef", shape=(6,))
-        model.center_ = check_array(state["center"], "center", shape=(5,))
-        model.spread_ = check_array(state["spread"], "spread", shape=(5,))
-        model.density_ref_, model.level_ = (float(v) for v in check_array(
-            state["reference"], "reference", shape=(2,)))
+        model.coef_ = check_array(state["coef"], "coef", shape=(7,))
+        model.center_ = check_array(state["center"], "center", shape=(6,))
+        model.spread_ = check_array(state["spread"], "spread", shape=(6,))
+        model.density_ref_, model.novelty_ref_, model.level_ = (float(v) for v in check_array(
+            state["reference"], "reference", shape=(3,)))
         model._index = NearestNeighbors().fit(pose_points(model.poses_, model.heading_scale))
         return model

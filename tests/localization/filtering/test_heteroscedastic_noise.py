@@ -16,7 +16,8 @@ from localization.filtering.heteroscedastic_noise import (
 
 def _data(seed: int = 0):
     """Training poses dense for x < 0 (2000) and thin for x > 0 (150); held-out residuals
-    three times larger where the sample is thin."""
+    three times larger where the sample is thin, and growing with the images' novelty u
+    (variance proportional to u)."""
     rng = np.random.default_rng(seed)
 
     def poses(n, lo, hi):
@@ -25,17 +26,18 @@ def _data(seed: int = 0):
 
     train = np.vstack([poses(2000, -10, 0), poses(150, 0, 10)])
     held = poses(800, -10, 10)
-    sd = np.where(held[:, 0] < 0, 0.1, 0.3)
+    u = rng.lognormal(0.0, 0.5, 800)
+    sd = np.where(held[:, 0] < 0, 0.1, 0.3) * np.sqrt(u)
     e = rng.standard_normal((800, 3)) * sd[:, None]
     J = np.tile(np.eye(3), (800, 1, 1))
-    return train, held, e, J
+    return train, held, e, J, u
 
 
 def _fitted(**params):
-    train, held, e, J = _data()
+    train, held, e, J, u = _data()
     model = HeteroscedasticNoise(**params)
     index = model.density_index(train)
-    geometry = model.geometry(index, held, J)
+    geometry = model.geometry(index, held, J, u)
     model.fit(e, held, np.diag([0.02, 0.02, 0.02]), geometry)
     return model, index
 
@@ -48,8 +50,19 @@ def test_scale_grows_where_training_samples_are_thin():
     assert min(s[2:]) > 3.0 * max(s[:2])  # variance ratio 9 between the halves
     assert model.coef_[1] > 0  # the density term is used, not only the neighbours
     # mean 1 over the held-out poses: only the distribution over the map is learned
-    _, held, _, J = _data()
-    assert np.mean(model.scale(held, model.geometry(index, held, J))) == pytest.approx(1.0, rel=0.1)
+    _, held, _, J, u = _data()
+    assert np.mean(model.scale(held, model.geometry(index, held, J, u))) == pytest.approx(1.0,
+                                                                                       rel=0.1)
+
+
+def test_an_unfamiliar_image_inflates_the_scale():
+    model, index = _fitted()
+    q = np.tile([[-5.0, 1.0, 0.0]], (3, 1))
+    J = np.tile(np.eye(3), (3, 1, 1))
+    s = model.scale(q, model.geometry(index, q, J, np.array([1.0, 4.0, 16.0])))
+    assert s[1] > 2.0 * s[0] and s[2] > 2.0 * s[1]  # variance proportional to u
+    typical = model.scale(q[:1], model.geometry(index, q[:1], J[:1]))  # no image: u = u_ref
+    assert typical[0] == pytest.approx(s[0], rel=0.3)
 
 
 def test_scale_away_from_every_sample_grows_with_the_distance():
@@ -94,21 +107,23 @@ def test_state_round_trip():
     ("clip_probability", 1.0, ValueError), ("min_scale", 2.0, ValueError),
     ("max_scale", 0.5, ValueError), ("ridge", float("nan"), ValueError)])
 def test_bad_settings_name_the_argument(name, value, error):
-    _, held, e, _ = _data()
+    _, held, e, _, _ = _data()
     model = HeteroscedasticNoise(**{name: value})
     with pytest.raises(error, match=name):
-        model.fit(e, held, np.eye(3), np.ones((len(held), 4)))
+        model.fit(e, held, np.eye(3), np.ones((len(held), 5)))
 
 
 def test_bad_inputs_raise_clear_errors():
-    train, held, e, J = _data()
+    train, held, e, J, _ = _data()
     model = HeteroscedasticNoise()
     with pytest.raises(NotFittedError):
-        model.scale(held, np.ones((len(held), 4)))
+        model.scale(held, np.ones((len(held), 5)))
     with pytest.raises(ValueError, match="geometry"):
-        model.fit(e, held, np.eye(3), np.ones((len(held), 3)))
+        model.fit(e, held, np.eye(3), np.ones((len(held), 4)))
     with pytest.raises(ValueError, match="at least"):
-        model.fit(e[:10], held[:10], np.eye(3), np.ones((10, 4)))
+        model.fit(e[:10], held[:10], np.eye(3), np.ones((10, 5)))
+    with pytest.raises(ValueError, match="novelty"):
+        model.geometry(model.density_index(train), held, J, np.ones(3))
     with pytest.raises(ValueError, match="jacobians"):
         model.geometry(model.density_index(train), held, J[:5])
     with pytest.raises(ValueError, match="train_poses"):
