@@ -47,7 +47,8 @@ class NoiseBenchConfig:
     """Settings of the noise-model comparison."""
 
     cities: str = field(default="31,32", metadata={"help": "comma-separated scene seeds"})
-    conditions: str = field(default="default,fog,seasonal,exposure,noise,motion_blur",
+    conditions: str = field(default="default,overcast,fog,seasonal,exposure,noise,motion_blur,"
+                                    "traffic",
                             metadata={"help": "condition presets of the recorded drives (the "
                                               "localizer sees daylight only)"})
     lanes: str = field(default="route", metadata={"help": "route or streets"})
