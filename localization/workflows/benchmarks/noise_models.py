@@ -1,7 +1,8 @@
 """Global against heteroscedastic measurement noise (issue 14): the EKF's mean NEES on the
 same recorded drives with one R per model and with R(theta) (docs/method.md §15.4).
 
-    python -m localization.workflows.benchmarks.noise_models --cities 31,32
+    python -m localization.workflows.benchmarks.noise_models --cities 31,32 --n-drives 4
+    # 345 s wall at load 3.9-4.7 (2 cores, shared); the table is in docs/benchmarks.md §8
 
 On each city the daylight localizer of the appearance benchmark (:mod:`.appearance`) is
 fitted (:func:`~localization.workflows.tracking.fit_city_localizer` around the route's
