@@ -15,9 +15,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 from sklearn.exceptions import NotFittedError
 
-from localization._localizer_noise import MEASUREMENTS
+from localization._localizer_noise import MEASUREMENTS, NOISE_MODELS
 from localization._validation import check_array, check_choice
 from localization.filtering.ekf import FunctionMeasurement
+from localization.filtering.measurement_noise import check_alpha as _check_alpha
 from localization.filtering.measurement_noise import inflate
 from localization.filtering.process_noise import world_process_noise
 from localization.geometry import Array, body_to_world, pose_residual
@@ -35,8 +36,8 @@ class BeliefInterfaceMixin:
         """Calibrated body-frame inflation (3,) of the model (ones when not calibrated)."""
         return np.asarray(getattr(self, "consistency_", {}).get(measurement, np.ones(3)))
 
-    def measurement_model(self, measurement: str, alpha: ArrayLike | None = None
-                          ) -> FunctionMeasurement:
+    def measurement_model(self, measurement: str, alpha: ArrayLike | None = None,
+                          noise: str = "global") -> FunctionMeasurement:
         """The filter's measurement model (h, H, R, residual) of the named kind.
 
         "pose": ``h(x) = x``, ``H = I``, ``R(x) = T(yaw) R_body T(yaw)^T``;
@@ -44,11 +45,15 @@ class BeliefInterfaceMixin:
         (R_body: the pose-equivalent noise in the body frame); "features": ``h = Phi*``,
         ``H = dPhi*/dtheta``, a constant R. R_body is inflated by ``alpha`` (default the
         calibrated ``consistency(measurement)``), the features' R by its mean. ``h`` and
-        ``H`` are NaN outside the training domain.
+        ``H`` are NaN outside the training domain. ``noise="heteroscedastic"``: R scaled by
+        ``s(x)`` (``noise_scale_``, docs/method.md §15.4).
         """
         check_choice(measurement, "measurement", MEASUREMENTS)
+        check_choice(noise, "noise", NOISE_MODELS)
         self._check_fitted(noise=True)
         alpha = self.consistency(measurement) if alpha is None else _check_alpha(alpha)
+        if noise == "heteroscedastic":
+            return self._heteroscedastic_model(measurement, alpha)
         reg, to_model = self.regressor_, self._to_model
         if measurement == "features":
             return FunctionMeasurement(
@@ -109,11 +114,3 @@ class BeliefInterfaceMixin:
         alpha = None if alpha is None else _check_alpha(alpha)
         Q = self.process_noise_body_ if alpha is None else inflate(self.process_noise_body_, alpha)
         return world_process_noise(Q, pose)
-
-
-def _check_alpha(alpha: ArrayLike) -> Array:
-    """A body-frame inflation: a positive number or (3,) positive numbers."""
-    a = check_array(alpha, "alpha")
-    if a.shape not in ((), (3,)) or np.any(a <= 0):
-        raise ValueError(f"alpha must be a positive number or 3 positive numbers, got {alpha}")
-    return a

@@ -5,7 +5,9 @@ stored as bytes), the noise model and the quality report as named arrays.
 
 Format 3 adds the map (``city_``, ``fingerprint_``) to the settings and ``quality/<key>``
 arrays; format-2 files still load, with an unknown city (``city_ = fingerprint_ = None``)
-and no quality report.
+and no quality report. The heteroscedastic noise scales (``noise_scale_``) are
+``noise_scale/<measurement>/<key>`` arrays (:meth:`HeteroscedasticNoise.get_state`): a file
+without them loads with none (an older reader ignores them).
 """
 
 from __future__ import annotations
@@ -20,12 +22,14 @@ import numpy as np
 
 from localization._localizer_map import check_city_info
 from localization.features import features_from_state
+from localization.filtering.heteroscedastic_noise import HeteroscedasticNoise
 from localization.gse.regressor import GSERegressor
 
 FORMAT = "appearance-nav-localizer/3"
 #: older formats :func:`load_localizer` still reads
 LEGACY_FORMATS = ("appearance-nav-localizer/2",)
 _GROUPS = ("noise", "rms", "tau", "consistency")
+_SCALE = "noise_scale"
 _ATTRS = {"noise": "noise_", "rms": "residual_rms_", "tau": "correlation_time_",
           "consistency": "consistency_"}
 
@@ -43,6 +47,8 @@ def save_localizer(loc: Any, path: str | Path) -> None:
     for group in _GROUPS:
         arrays |= {f"{group}/{k}": v for k, v in getattr(loc, _ATTRS[group]).items()}
     arrays |= {f"quality/{k}": np.float64(v) for k, v in getattr(loc, "quality_", {}).items()}
+    for name, model in getattr(loc, "noise_scale_", {}).items():
+        arrays |= {f"{_SCALE}/{name}/{k}": v for k, v in model.get_state().items()}
     arrays["control_gain"] = loc.control_gain_
     if getattr(loc, "initial_noise_", None) is not None:
         arrays["initial_noise"] = loc.initial_noise_
@@ -83,6 +89,7 @@ def load_localizer(cls: type, path: str | Path) -> Any:
         for group in _GROUPS:
             setattr(loc, _ATTRS[group], {k[len(group) + 1:]: v for k, v in data.items()
                                          if k.startswith(group + "/")})
+        loc.noise_scale_ = _load_scales(data)
         loc.control_gain_ = np.asarray(data["control_gain"], dtype=np.float64)
         loc.process_noise_body_ = data.get("process_noise_body")
         loc.initial_noise_ = data.get("initial_noise")
@@ -96,6 +103,16 @@ def load_localizer(cls: type, path: str | Path) -> Any:
         raise ValueError(f"{path}: corrupted or incomplete localizer "
                          f"({type(err).__name__}: {err})") from err
     return loc
+
+
+def _load_scales(data: dict[str, np.ndarray]) -> dict[str, HeteroscedasticNoise]:
+    """``noise_scale_`` from the ``noise_scale/<measurement>/<key>`` arrays."""
+    states: dict[str, dict[str, np.ndarray]] = {}
+    for k, v in data.items():
+        if k.startswith(_SCALE + "/"):
+            name, key = k[len(_SCALE) + 1:].split("/", 1)
+            states.setdefault(name, {})[key] = v
+    return {name: HeteroscedasticNoise.from_state(state) for name, state in states.items()}
 
 
 def _check_path(path: object) -> Path:

@@ -2,30 +2,40 @@
 
 Process noise and control gains from recorded motion; measurement noise R from held-out
 residuals (K-fold refits on the training data, or a recorded drive with the residuals'
-correlation time); the consistency calibration that runs the filter over a drive. The
-maths is in :mod:`localization.filtering.measurement_noise` and :mod:`localization.filtering.process_noise`.
+correlation time); the consistency calibration that runs the filter over a drive; the
+heteroscedastic scale s(theta) of R from the K-fold residuals and the maps' local geometry
+(``noise_scale_``, used by ``measurement_model(name, noise="heteroscedastic")``). The
+maths is in :mod:`localization.filtering.measurement_noise`,
+:mod:`localization.filtering.heteroscedastic_noise` and :mod:`localization.filtering.process_noise`.
 """
 
 from __future__ import annotations
 
+import warnings
 from typing import Any, Self
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from sklearn.exceptions import NotFittedError
 from sklearn.model_selection import KFold
 
-from localization._validation import check_array, check_images
+from localization._validation import check_array, check_choice, check_images
 from localization.filtering.calibration import calibrate_consistency
+from localization.filtering.ekf import FunctionMeasurement
+from localization.filtering.heteroscedastic_noise import HeteroscedasticNoise, scaled_covariance
 from localization.filtering.measurement_noise import (
+    check_alpha,
     correlation_time,
     inflate,
     robust_covariance,
 )
 from localization.filtering.process_noise import estimate_control_gain, estimate_process_noise
-from localization.geometry import Array, to_body
+from localization.geometry import Array, body_to_world, pose_residual, to_body
 from localization.gse.regressor import GSERegressor
 
 MEASUREMENTS = ("pose", "features", "representation")
+#: measurement-noise models of ``measurement_model(name, noise=...)``
+NOISE_MODELS = ("global", "heteroscedastic")
 
 
 def check_data(images: ArrayLike, poses: ArrayLike, what: str = ""
@@ -76,7 +86,9 @@ class NoiseModelMixin:
 
         1. control gains and Q from the controls (:meth:`fit_process_noise`);
         2. R of each model from the residuals of its measurements at the true poses:
-           robust covariance, inflated per component by the residuals' correlation time.
+           robust covariance, inflated per component by the residuals' correlation time;
+           the heteroscedastic scales (``noise_scale_``, from :meth:`fit`'s K-fold
+           residuals) are rescaled to average 1 over the drive's frames.
 
         Resets the consistency calibration (:meth:`calibrate`) and the quality report
         (``quality_``).
@@ -94,8 +106,10 @@ class NoiseModelMixin:
         self._check_fitted()
         images, poses, controls = self._check_drive(images, poses, controls)
         self.fit_process_noise(motion_model, poses, controls)
-        self._set_noise(self._residuals(self.regressor_, self.transform(images), poses),
-                        sequence=True)
+        W = self.transform(images)
+        self._set_noise(self._residuals(self.regressor_, W, poses), sequence=True)
+        for model in getattr(self, "noise_scale_", {}).values():  # the drive's level
+            model.normalize(poses, self._geometry(model, poses, W))
         self.consistency_ = {}
         self.quality_ = {}  # it described the previous noise model
         return self
@@ -158,13 +172,179 @@ class NoiseModelMixin:
                 "features": W - reg.predict_features(theta),
                 "representation": to_body(rep_err, poses[:, 2])}
 
-    def _k_fold_residuals(self, W: Array, poses: Array) -> dict[str, Array]:
+    def _fit_k_fold_noise(self, W: Array, poses: Array) -> None:
+        """R of each model from K-fold held-out residuals (:meth:`_set_noise`) and its
+        heteroscedastic scale ``noise_scale_[name]`` (a
+        :class:`~localization.filtering.heteroscedastic_noise.HeteroscedasticNoise`)."""
+        res, held, geometry = self._k_fold_residuals(W, poses)
+        self._set_noise(res, sequence=False)
+        self.noise_scale_ = {k: HeteroscedasticNoise().fit(e, held, self.noise_[k], geometry)
+                             for k, e in res.items()}
+
+    def _k_fold_residuals(self, W: Array, poses: Array
+                          ) -> tuple[dict[str, Array], Array, Array]:
         """Held-out residuals of K-fold refits (the features are fitted once on all images:
-        unsupervised, they see no pose)."""
+        unsupervised, they see no pose), their poses (n, 3) and the local geometry (n, 5) of
+        each fold's maps there with the images' novelty (:meth:`HeteroscedasticNoise.geometry`).
+
+        A fold holds fewer samples than the fit; where its neighbourhood graph falls apart
+        (25 samples of a corner apart from 6375 on city 12, even with 20 neighbours) the fold
+        gives no residuals (a RuntimeWarning says so): the folds are random, so the others
+        are an unbiased sample. ValueError if fewer than two folds are left."""
         folds = KFold(int(self.noise_folds), shuffle=True, random_state=self.random_state)
         parts: dict[str, list[Array]] = {k: [] for k in MEASUREMENTS}
-        for train, test in folds.split(W):
-            reg = self._new_regressor().fit(W[train], self._to_model(poses[train]))
+        held, geometry, failed = [], [], []
+        model = HeteroscedasticNoise()
+        for i, (train, test) in enumerate(folds.split(W)):
+            try:
+                reg = self._new_regressor().fit(W[train], self._to_model(poses[train]))
+            except ValueError as err:
+                if "connected components" not in str(err):
+                    raise
+                failed.append(f"fold {i}: {err}")
+                continue
             for k, e in self._residuals(reg, W[test], poses[test]).items():
                 parts[k].append(e)
-        return {k: np.concatenate(v) for k, v in parts.items()}
+            held.append(poses[test])
+            geometry.append(model.geometry(model.density_index(poses[train]), poses[test],
+                                           reg.embed_pose_jacobian(self._to_model(poses[test])),
+                                           novelty(reg, W[test])))
+        if failed:
+            if len(held) < 2:
+                raise ValueError(f"noise_folds={self.noise_folds}: fewer than two folds could "
+                                 f"be fitted ({'; '.join(failed)})")
+            warnings.warn(f"{len(failed)} of {self.noise_folds} noise folds left out: "
+                          f"{'; '.join(failed)}", RuntimeWarning, stacklevel=3)
+        return ({k: np.concatenate(v) for k, v in parts.items()}, np.concatenate(held),
+                np.concatenate(geometry))
+
+    # ------------------------------------------------- heteroscedastic noise
+    def noise_scale(self, poses: ArrayLike, measurement: str, W: ArrayLike | None = None
+                    ) -> Array:
+        """The heteroscedastic scale ``s(theta, w)`` (n,) of the model's R at world poses
+        (n, 3) for images of features W (n, m) (None: typical frames):
+        ``R_body(theta) = s(theta, w) R_body``; NaN where the GSE maps have no value.
+
+        Raises
+        ------
+        NotFittedError
+            Without a heteroscedastic model (fit with ``noise_folds >= 2``).
+        """
+        model = self._noise_scale_model(measurement)
+        poses = check_array(poses, "poses", shape=(None, 3), finite=False, what="[x, y, yaw]")
+        return model.scale(poses, self._geometry(model, poses, W))
+
+    def _geometry(self, model: HeteroscedasticNoise, poses: Array, W: ArrayLike | None
+                  ) -> Array:
+        """:meth:`HeteroscedasticNoise.geometry` (n, 5) of the fitted maps at world poses
+        (n, 3) with images of features W (n, m) (None: typical frames)."""
+        J = self.regressor_.embed_pose_jacobian(self._to_model(np.nan_to_num(poses)))
+        J[~np.all(np.isfinite(poses), axis=1)] = np.nan
+        u = None if W is None else novelty(self.regressor_, check_array(
+            W, "W", shape=(len(poses), None)))
+        return model.geometry(self._density_index(model), poses, J, u)
+
+    def measurement_noise(self, poses: ArrayLike, measurement: str,
+                          alpha: ArrayLike | None = None, W: ArrayLike | None = None) -> Array:
+        """Heteroscedastic R(theta) at world poses (n, 3): (n, 3, 3) world-frame pose-error
+        covariances ``T(yaw) s(theta) R_body T(yaw)^T`` for "pose" and "representation"
+        (the representation model's R is ``H R(theta) H^T``), (n, m, m) ``s(theta) R`` for
+        "features"; R_body inflated by ``alpha`` (default the calibrated consistency); W as
+        :meth:`noise_scale`. NaN matrices where the maps have no value; symmetric positive
+        definite elsewhere."""
+        alpha = self.consistency(measurement) if alpha is None else check_alpha(alpha)
+        s = self.noise_scale(poses, measurement, W)
+        if measurement == "features":
+            return scaled_covariance(self.noise_["features"] * float(np.mean(alpha)), s)
+        R = scaled_covariance(inflate(self.noise_[measurement], alpha), s)
+        poses = np.asarray(poses, dtype=np.float64)
+        return np.array([body_to_world(Rb, float(p[2])) if np.isfinite(p[2]) else Rb
+                         for Rb, p in zip(R, poses)]).reshape(R.shape)
+
+    def _noise_scale_model(self, measurement: str) -> HeteroscedasticNoise:
+        check_choice(measurement, "measurement", MEASUREMENTS)
+        self._check_fitted(noise=True)
+        model = getattr(self, "noise_scale_", {}).get(measurement)
+        if model is None:
+            raise NotFittedError("no heteroscedastic noise model: fit with noise_folds >= 2 "
+                                 "(it is learned from the K-fold held-out residuals)")
+        return model
+
+    def _density_index(self, model: HeteroscedasticNoise) -> Any:
+        """Neighbour index of the training poses (cached; rebuilt after partial_fit)."""
+        theta = self.regressor_.theta_
+        key = (id(theta), len(theta), model.heading_scale, model.density_neighbors)
+        cache = getattr(self, "_density_cache", None)
+        if cache is None or cache[0] != key:
+            cache = (key, model.density_index(self._from_model(theta)))
+            self._density_cache = cache
+        return cache[1]
+
+    def _heteroscedastic_model(self, measurement: str, alpha: Array) -> HeteroscedasticMeasurement:
+        """``measurement_model(measurement, alpha, noise="heteroscedastic")``: the global
+        model's h, H and residual with ``R(x) = s(x, w) R`` for the image last passed to
+        ``observe(w)`` (a typical frame before) and ``gate_R(x) = s(x) R`` (a typical frame:
+        the NIS gate does not widen for an unfamiliar image). Where the maps have no value
+        the pose model takes s = ``max_scale``; the other two models have no H there."""
+        model = self._noise_scale_model(measurement)
+        reg, to_model = self.regressor_, self._to_model
+        index = self._density_index(model)
+        cache: dict[str, Array] = {}
+
+        def J(x: Array) -> Array:  # the filter asks for H and R at the same x
+            if "x" not in cache or not np.array_equal(cache["x"], x):
+                cache["x"], cache["J"] = np.array(x), reg.embed_pose_jacobian(to_model(x))[0]
+            return cache["J"]
+
+        def s(x: Array, image: bool = True) -> float:
+            x = np.asarray(x, dtype=np.float64).reshape(1, 3)
+            u = None if out.novelty is None or not image else np.array([out.novelty])
+            v = float(model.scale(x, model.geometry(index, x, J(x[0])[None], u))[0])
+            return v if np.isfinite(v) else float(model.max_scale)
+
+        if measurement == "features":
+            Rf = self.noise_["features"] * float(np.mean(alpha))
+            out = HeteroscedasticMeasurement(
+                reg, h=lambda x: reg.predict_features(to_model(x))[0],
+                H=lambda x: reg.features_jacobian(to_model(x))[0], R=lambda x: s(x) * Rf,
+                gate_R=lambda x: s(x, False) * Rf)
+            return out
+        Rb = inflate(self.noise_[measurement], alpha)
+        if measurement == "pose":
+            out = HeteroscedasticMeasurement(
+                reg, h=lambda x: np.array(x, dtype=np.float64), H=lambda x: np.eye(3),
+                R=lambda x: body_to_world(s(x) * Rb, float(x[2])), residual=pose_residual,
+                gate_R=lambda x: body_to_world(s(x, False) * Rb, float(x[2])))
+            return out
+
+        def R_rep(x: Array, image: bool = True) -> Array:
+            Hx = J(x)
+            return Hx @ body_to_world(s(x, image) * Rb, float(x[2])) @ Hx.T
+
+        out = HeteroscedasticMeasurement(reg, h=lambda x: reg.embed_pose(to_model(x))[0], H=J,
+                                         R=R_rep, gate_R=lambda x: R_rep(x, False))
+        return out
+
+
+def novelty(reg: GSERegressor, W: Array) -> Array:
+    """Distance (n,) of features W (n, m) from the learned feature manifold,
+    ``|w - g_u(r*(w))|`` (reduce-then-recover; NaN out of the domain): large for an image
+    unlike every training image (another light, an occluder)."""
+    return np.linalg.norm(W - reg.reconstruct(W), axis=1)
+
+
+class HeteroscedasticMeasurement(FunctionMeasurement):
+    """A :class:`FunctionMeasurement` whose R(x) also depends on the current image:
+    :meth:`observe` sets its novelty (the belief filter calls it before each update);
+    ``gate_R(x)``, the R of a typical image, is what the EKF's NIS gate uses."""
+
+    def __init__(self, regressor: GSERegressor, gate_R: Any, **model: Any) -> None:
+        super().__init__(**model)
+        self._regressor = regressor
+        self.gate_R = gate_R
+        self.novelty: float | None = None
+
+    def observe(self, w: ArrayLike) -> None:
+        """The features w (m,) of the image of the next update."""
+        u = float(novelty(self._regressor, np.asarray(w, dtype=np.float64).reshape(1, -1))[0])
+        self.novelty = u if np.isfinite(u) else None

@@ -124,6 +124,11 @@ class AppearanceLocalizer(NoiseModelMixin, BeliefInterfaceMixin, MapMixin):
     noise_ : dict of str -> ndarray
         R per measurement model: "pose" and "representation" (3, 3) pose-error covariances
         in the body frame, "features" (m, m); inflated by ``correlation_time_``.
+    noise_scale_ : dict of str -> HeteroscedasticNoise
+        Per measurement model, the heteroscedastic scale s(theta) of R learned from the
+        K-fold residuals (``noise_folds >= 2``; empty otherwise; kept by :meth:`fit_noise`,
+        which re-estimates the level R): used by ``measurement_model(name,
+        noise="heteroscedastic")`` (:mod:`localization.filtering.heteroscedastic_noise`).
     initial_noise_ : ndarray (3, 3)
         Plain (not robust) second moment of the pose residuals in the body frame: the
         covariance of the initial belief, which must cover psi*'s rare metre-scale errors.
@@ -201,8 +206,9 @@ class AppearanceLocalizer(NoiseModelMixin, BeliefInterfaceMixin, MapMixin):
         self.residual_rms_: dict[str, Array] = {}
         self.consistency_: dict[str, Array] = {}
         self.initial_noise_: Array | None = None
+        self.noise_scale_: dict[str, Any] = {}
         if int(self.noise_folds) >= 2:
-            self._set_noise(self._k_fold_residuals(W, poses), sequence=False)
+            self._fit_k_fold_noise(W, poses)
         self.process_noise_body_: Array | None = None
         self.control_gain_ = np.ones(2)
         return self

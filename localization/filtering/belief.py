@@ -35,7 +35,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
-from localization._validation import check_int, check_real
+from localization._validation import check_choice, check_int, check_real
 from localization.filtering.divergence import DivergenceMonitor
 from localization.filtering.ekf import (
     OutOfDomainError,
@@ -55,7 +55,8 @@ class Localizer(Protocol):
     control_gain_: Any
 
     def consistency(self, measurement: str) -> Array: ...
-    def measurement_model(self, measurement: str, alpha: ArrayLike | None = None) -> Any: ...
+    def measurement_model(self, measurement: str, alpha: ArrayLike | None = None,
+                          **options: Any) -> Any: ...
     def process_noise(self, pose: ArrayLike, alpha: ArrayLike | None = None) -> Array: ...
     def initial_belief(self, w: ArrayLike) -> tuple[Array, Array]: ...
     def prior(self) -> tuple[Array, Array]: ...
@@ -77,6 +78,7 @@ def check_localizer(localizer: object) -> Localizer:
 
 
 STATUSES = ("initial", "accepted", "gated", "out_of_domain", "relocalized")
+NOISE_MODELS = ("global", "heteroscedastic")
 RESET_MODES = ("image", "global")
 CONFIRM_STEPS = 3  # accepted measurements after a restart before the status is "tracking"
 LOST_AFTER_MISSES = 5  # steps in a row without an accepted measurement: "lost"
@@ -108,6 +110,10 @@ class BeliefFilter:
     detect_divergence : bool or dict
         Run a :class:`~localization.filtering.divergence.DivergenceMonitor` (a dict: its
         settings); False: off (the EKF as before).
+    noise : {"global", "heteroscedastic"}
+        The measurement noise: one R per model, or R(x) scaled where the maps are weak
+        (the localizer's ``measurement_model(..., noise="heteroscedastic")``; a localizer
+        fitted with ``noise_folds >= 2``).
 
     Attributes
     ----------
@@ -123,8 +129,10 @@ class BeliefFilter:
                  gate_probability: float | None = 0.997, relocalize_after: int | None = 50,
                  alpha: ArrayLike | None = None, inflate_after: int | None = 3,
                  inflate_factor: float = 2.0,
-                 detect_divergence: bool | dict[str, Any] = False) -> None:
+                 detect_divergence: bool | dict[str, Any] = False,
+                 noise: str = "global") -> None:
         check_localizer(localizer)
+        check_choice(noise, "noise", NOISE_MODELS)
         motion_model = check_motion_model(motion_model)
         gate_probability = check_gate_probability(gate_probability)
         if relocalize_after is not None:
@@ -140,7 +148,10 @@ class BeliefFilter:
         self.relocalize_after = relocalize_after
         self.alpha = localizer.consistency(measurement) if alpha is None else \
             np.asarray(alpha, dtype=np.float64)
-        self.model = localizer.measurement_model(measurement, alpha=self.alpha)
+        self.noise = noise
+        self.model = localizer.measurement_model(measurement, alpha=self.alpha) \
+            if noise == "global" else \
+            localizer.measurement_model(measurement, alpha=self.alpha, noise=noise)
         self.gain = np.asarray(localizer.control_gain_, dtype=np.float64)
         self.ekf: PoseEKF | None = None
         self.last_update: UpdateResult | None = None
@@ -280,6 +291,7 @@ class BeliefFilter:
         prior, kept, forced = self.ekf, (self.misses, self.gated), self._forced
         self._start(x0, P0)
         z = self.localizer.measure(w, self.measurement)
+        self._observe(w)
         try:
             ok = bool(np.all(np.isfinite(z))) and self.ekf.update(z, self.model).accepted
         except OutOfDomainError:
@@ -302,11 +314,19 @@ class BeliefFilter:
         lost = self._lost_now or self.misses >= LOST_AFTER_MISSES
         self.belief_status = "lost" if lost else "tracking"
 
+    def _observe(self, w: Array) -> None:
+        """Tell a measurement model whose R depends on the image (``observe(w)``, e.g. the
+        heteroscedastic one) which image the next update uses."""
+        observe = getattr(self.model, "observe", None)
+        if callable(observe):
+            observe(w)
+
     def _update(self, w: Array) -> tuple[float, str]:
         assert self.ekf is not None
         z = self.localizer.measure(w, self.measurement)
         if not np.all(np.isfinite(z)):
             return np.nan, "out_of_domain"
+        self._observe(w)
         try:
             self.last_update = self.ekf.update(z, self.model)
         except OutOfDomainError:

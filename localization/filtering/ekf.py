@@ -41,7 +41,10 @@ class MeasurementModel(Protocol):
 
     ``h(x) -> (dim_z,)``, ``H(x) -> (dim_z, 3)`` (= dh/dx), ``R`` (dim_z, dim_z) and
     ``residual(z, z_pred) -> (dim_z,)``. A model may also define ``R_at(x)`` for a state
-    dependent noise; the filter calls it when present and reads ``R`` otherwise.
+    dependent noise; the filter calls it when present and reads ``R`` otherwise; and
+    ``gate_R(x)``: the noise the NIS gate uses instead of R (a model that inflates R for an
+    unfamiliar image gates it as a familiar one: the inflation lowers its weight, it never
+    lets through a measurement the gate would reject).
     """
 
     R: ArrayLike
@@ -323,7 +326,8 @@ class PoseEKF(ExtendedKalmanFilter):
     def update(self, z: ArrayLike, model: MeasurementModel) -> UpdateResult:  # type: ignore[override]
         """Gated EKF update with measurement ``z`` of model ``model``.
 
-        ``y = residual(z, h(x))``, ``S = H P H^T + R``, ``NIS = y^T S^-1 y`` (Cholesky solve). If
+        ``y = residual(z, h(x))``, ``S = H P H^T + R``, ``NIS = y^T S^-1 y`` (Cholesky solve;
+        with the model's ``gate_R(x)`` in S when it has one). If
         ``NIS`` exceeds the gate the state is left unchanged; otherwise filterpy's update runs:
         ``K = P H^T S^-1``, ``x = x + K y``, ``P = (I - K H) P (I - K H)^T + K R K^T``; then yaw
         is wrapped and ``P`` symmetrized.
@@ -341,7 +345,9 @@ class PoseEKF(ExtendedKalmanFilter):
         """
         z, z_pred, H, R, y = self.innovation(z, model)
         dim_z = z.shape[0]
-        S = H @ self.P @ H.T + R
+        gate_R = getattr(model, "gate_R", None)
+        R_gate = R if gate_R is None else _covariance(gate_R(self.x), "gate_R(x)", dim_z)
+        S = H @ self.P @ H.T + R_gate
         try:
             nis = float(y @ cho_solve(cho_factor(S), y))
         except LinAlgError:

@@ -182,3 +182,11 @@ def inflate(C: ArrayLike, alpha: ArrayLike) -> Array:
         raise ValueError(f"alpha must be non-negative factors, got {alpha}")
     d = np.sqrt(alpha)
     return d[:, None] * C * d[None, :]
+
+
+def check_alpha(alpha: ArrayLike) -> Array:
+    """A body-frame inflation: a positive number or (3,) positive numbers."""
+    a = check_array(alpha, "alpha")
+    if a.shape not in ((), (3,)) or np.any(a <= 0):
+        raise ValueError(f"alpha must be a positive number or 3 positive numbers, got {alpha}")
+    return a

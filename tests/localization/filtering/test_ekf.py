@@ -179,6 +179,29 @@ def test_gate_rejects_outlier_and_keeps_state() -> None:
     assert res.accepted and res.threshold == np.inf and ekf.x[0] > x[0] + 1.0
 
 
+def test_gate_uses_the_models_gate_R_and_the_update_its_R() -> None:
+    """A model that inflates R (e.g. for an unfamiliar image) but gates with ``gate_R``: an
+    outlier the gate rejects stays rejected, however large R; an accepted measurement is
+    weighted by R."""
+    model = UnicycleModel(DT)
+    big = PoseMeasurement(100.0 * R_POSE)
+    ekf = PoseEKF(model, Q_TRUE, [1.0, 2.0, 0.3], P0)
+    x, P = ekf.x.copy(), ekf.P.copy()
+    outlier = x + np.array([3.0, -2.0, 0.0])
+    assert ekf.update(outlier, big).accepted  # the inflated R alone lets it in
+    ekf = PoseEKF(model, Q_TRUE, x, P)
+    big.gate_R = lambda x: R_POSE
+    res = ekf.update(outlier, big)
+    assert not res.accepted
+    np.testing.assert_array_equal(ekf.x, x)
+    z = x + np.array([0.05, -0.02, 0.01])
+    res = ekf.update(z, big)
+    y = pose_residual(z, x)
+    assert res.accepted and res.nis == pytest.approx(y @ np.linalg.solve(P + R_POSE, y))
+    K = P @ np.linalg.inv(P + 100.0 * R_POSE)
+    np.testing.assert_allclose(ekf.x, x + K @ y, atol=1e-12)
+
+
 def test_gate_false_alarm_rate_matches_probability() -> None:
     rng = np.random.default_rng(2)
     meas = PoseMeasurement(R_POSE)

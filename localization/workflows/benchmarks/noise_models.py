@@ -1,0 +1,174 @@
+"""Global against heteroscedastic measurement noise (issue 14): the EKF's mean NEES on the
+same recorded drives with one R per model and with R(theta) (docs/method.md §15.4).
+
+    python -m localization.workflows.benchmarks.noise_models --cities 31,32 --n-drives 4
+    # 345 s wall at load 3.9-4.7 (2 cores, shared); the table is in docs/benchmarks.md §8
+
+On each city the daylight localizer of the appearance benchmark (:mod:`.appearance`) is
+fitted (:func:`~localization.workflows.tracking.fit_city_localizer` around the route's
+lanes, 64 x 64 images, 6000 of them, PixelPCA(64, normalize="channels"), motion noise 0.1, a
+1500-step noise drive), with ``noise_folds=5``: the K-fold residuals that the heteroscedastic
+scale is learned from (the global R still comes from the noise drive, as without them).
+Then ``n_drives`` drives of ``drive_steps`` steps (around the route from path points 0,
+600, ...; or street tours with ``lanes="streets"``) are recorded on the true pose under each
+condition preset, and the "representation" belief runs
+over each twice, from the first image (psi*), with ``noise="global"`` and
+``noise="heteroscedastic"``: the same images, controls and start for both. Reported per city
+and condition: position RMSE and the mean over drives of the run-averaged NEES against its
+chi-square 95 % band (:func:`~localization.workflows.tracking.nees_band`), for both.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
+
+# isort: split
+import gymnasium as gym
+import numpy as np
+
+from envs.datasets import drive_route, drive_streets
+from localization.filtering.belief import NOISE_MODELS, BeliefFilter
+from localization.geometry import pose_residual
+from localization.workflows.tracking import fit_city_localizer, nees_band
+
+__all__ = ["NoiseBenchConfig", "run_noise_bench"]
+
+
+@dataclass
+class NoiseBenchConfig:
+    """Settings of the noise-model comparison."""
+
+    cities: str = field(default="31,32", metadata={"help": "comma-separated scene seeds"})
+    conditions: str = field(default="default,overcast,fog,seasonal,exposure,noise,motion_blur,"
+                                    "traffic",
+                            metadata={"help": "condition presets of the recorded drives (the "
+                                              "localizer sees daylight only)"})
+    lanes: str = field(default="route", metadata={"help": "route or streets"})
+    n_train: int = field(default=6000, metadata={"help": "lane training images"})
+    image_size: int = field(default=64, metadata={"help": "square image side (px)"})
+    n_components: int = field(default=64, metadata={"help": "PixelPCA components"})
+    normalize: str = field(default="channels", metadata={"help": "PixelPCA normalize"})
+    n_drive: int = field(default=1500, metadata={"help": "steps of the noise drive"})
+    n_drives: int = field(default=4, metadata={"help": "recorded drives per city and condition"})
+    drive_steps: int = field(default=300, metadata={"help": "steps of each recorded drive"})
+    motion_noise: float = field(default=0.1, metadata={"help": "env actuation noise"})
+    noise_folds: int = field(default=5, metadata={
+        "help": "K-fold refits of the heteroscedastic scale (3 split city 12's graph)"})
+    seed: int = field(default=0, metadata={"help": "seed of the fit and the drives"})
+    out: str = field(default="results/bench_noise_models.json", metadata={
+        "help": "JSON output"})
+
+
+def make_env(args: NoiseBenchConfig, city: int, conditions: str = "default") -> gym.Env:
+    return gym.make("AppearanceNav-v0", scene_seed=city, conditions=conditions,
+                    image_size=(args.image_size, args.image_size),
+                    motion_noise=args.motion_noise, max_episode_steps=None)
+
+
+def fit(args: NoiseBenchConfig, city: int) -> Any:
+    """The street-wide localizer of ``city`` with its K-fold heteroscedastic scales."""
+    env = make_env(args, city)
+    params: dict[str, Any] = {"n_components": args.n_components}
+    if args.normalize != "none":
+        params["normalize"] = args.normalize
+    with warnings.catch_warnings():  # GSE's eigen-gap warning, the quality warning
+        warnings.simplefilter("ignore")
+        loc, _ = fit_city_localizer(
+            env, n_train=args.n_train, lanes=args.lanes, n_drive=args.n_drive, seed=args.seed,
+            localizer_params={"noise_folds": args.noise_folds, "features_params": params},
+            calibrate_on_belief=False, measurements=("representation",), quality_steps=0)
+    env.close()
+    return loc
+
+
+def record(env: gym.Env, args: NoiseBenchConfig, k: int) -> tuple[np.ndarray, ...]:
+    """Drive ``k`` on the true pose: (images, poses, controls)."""
+    seed = args.seed + 1000 * (k + 1)
+    if args.lanes == "route":
+        return drive_route(env, args.drive_steps, seed=seed, start=600 * k, progress=False)
+    return drive_streets(env, args.drive_steps, seed=seed, progress=False)
+
+
+def score_drive(loc: Any, motion_model: Any, W: np.ndarray, poses: np.ndarray,
+                controls: np.ndarray, noise: str) -> dict[str, float]:
+    """The belief (``noise``) over one recorded drive from its first image: RMSE, mean NEES,
+    acceptance."""
+    belief = BeliefFilter(loc, motion_model, "representation", noise=noise)
+    means, covs, status = belief.run(W, controls)
+    e = np.array([pose_residual(t, m) for t, m in zip(poses, means)])
+    nees = np.einsum("ni,nij,nj->n", e, np.linalg.inv(covs), e)
+    return {"rmse": float(np.sqrt(np.mean(np.sum(e[:, :2] ** 2, axis=1)))),
+            "nees_mean": float(np.mean(nees)),
+            "accepted": float(np.mean(np.array(status[1:]) == "accepted"))}
+
+
+def summarize(runs: list[dict[str, float]]) -> dict[str, Any]:
+    lo, hi = nees_band(len(runs))
+    nees = float(np.mean([r["nees_mean"] for r in runs]))
+    return {"drives": len(runs), "nees_mean": nees, "nees_band": [lo, hi],
+            "in_band": bool(lo <= nees <= hi),
+            "rmse": float(np.sqrt(np.mean([r["rmse"] ** 2 for r in runs]))),
+            "accepted": float(np.mean([r["accepted"] for r in runs]))}
+
+
+def run_noise_bench(args: NoiseBenchConfig) -> dict[str, Any]:
+    """Run the comparison; write ``args.out`` (JSON) and print a markdown table."""
+    t0 = time.perf_counter()
+    cities = [int(c) for c in args.cities.split(",")]
+    conditions = [c.strip() for c in args.conditions.split(",")]
+    runs: dict[str, dict[str, list[dict[str, float]]]] = {}
+    for city in cities:
+        loc = fit(args, city)
+        for cond in conditions:
+            env = make_env(args, city, cond)
+            key = f"{city}/{cond}"
+            runs[key] = {n: [] for n in NOISE_MODELS}
+            for k in range(args.n_drives):
+                images, poses, controls = record(env, args, k)
+                W = loc.transform(images)
+                for n in NOISE_MODELS:
+                    runs[key][n].append(score_drive(loc, env.unwrapped.motion_model, W, poses,
+                                                    controls, n))
+            env.close()
+    summary = {key: {n: summarize(r[n]) for n in NOISE_MODELS} for key, r in runs.items()}
+    result = {"args": dataclasses.asdict(args), "seconds": time.perf_counter() - t0,
+              "summary": summary, "runs": runs}
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=2))
+    print(markdown(result))
+    return result
+
+
+def markdown(result: dict[str, Any]) -> str:
+    """A table: per city and condition, RMSE and mean NEES (band) of both noise models."""
+    lines = ["| city / condition | NEES band | global: RMSE, NEES | heteroscedastic: RMSE, NEES |",
+             "|---|---|---|---|"]
+    for key, s in result["summary"].items():
+        g, h = s["global"], s["heteroscedastic"]
+        lo, hi = g["nees_band"]
+        cell = [f"{r['rmse']:.3f} m, {r['nees_mean']:.2f}{'' if r['in_band'] else ' (out)'}"
+                for r in (g, h)]
+        lines.append(f"| {key} | [{lo:.2f}, {hi:.2f}] | {cell[0]} | {cell[1]} |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    for f in dataclasses.fields(NoiseBenchConfig):
+        parser.add_argument(f"--{f.name.replace('_', '-')}", type=type(f.default),
+                            default=f.default, help=f.metadata["help"])
+    run_noise_bench(NoiseBenchConfig(**vars(parser.parse_args(argv))))
+
+
+if __name__ == "__main__":
+    main()
