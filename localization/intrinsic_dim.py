@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.sparse.csgraph import connected_components
+from scipy.sparse.csgraph import connected_components, shortest_path
 from scipy.spatial.distance import pdist
 from sklearn.manifold import Isomap
 from sklearn.neighbors import NearestNeighbors, kneighbors_graph
@@ -31,7 +31,7 @@ from sklearn.neighbors import NearestNeighbors, kneighbors_graph
 from localization.geometry import Array
 
 __all__ = ["DimensionEstimate", "global_dimension", "intrinsic_dimension_table",
-           "local_dimension", "pointwise_dimension"]
+           "local_dimension", "loop_cut_mask", "pointwise_dimension"]
 
 
 @dataclass
@@ -83,9 +83,52 @@ def _prepare(X: ArrayLike, min_samples: int, max_samples: int | None, seed: int,
     return X, info
 
 
+def loop_cut_mask(X: Array, n_neighbors: int = 12, cut_fraction: float = 0.1,
+                  seed: int = 0) -> tuple[Array, bool]:
+    """Points to keep so that a closed loop becomes an open arc (Isomap cannot embed a loop
+    in R^1: a circle's geodesic distances need two dimensions).
+
+    On the k-NN graph (edge lengths = distances), from a random point a take the farthest
+    point b (the antipode on a loop) and the geodesic distances g from b. The data form a
+    loop if the points at mid-range, ``0.45 <= g / max(g) <= 0.55``, fall in two or more
+    connected pieces of the graph (the two branches of the loop between b and a); then the
+    points within ``cut_fraction * max(g)`` of b are dropped (the cut). Otherwise nothing is
+    dropped.
+
+    Parameters
+    ----------
+    X : ndarray of shape (n, p)
+    n_neighbors : int, default=12
+    cut_fraction : float, default=0.1
+        Geodesic radius of the cut relative to the largest distance from b.
+    seed : int, default=0
+        Seed of the start point a.
+
+    Returns
+    -------
+    keep : ndarray of bool, shape (n,)
+    is_loop : bool
+    """
+    if not 0.0 < cut_fraction < 0.5:
+        raise ValueError(f"cut_fraction must be in (0, 0.5), got {cut_fraction}")
+    G = kneighbors_graph(X, n_neighbors, mode="distance")
+    G = G.maximum(G.T).tocsr()
+    a = int(np.random.default_rng(seed).integers(len(X)))
+    ga = shortest_path(G, directed=False, indices=[a])[0]
+    b = int(np.argmax(np.where(np.isfinite(ga), ga, -1.0)))
+    g = shortest_path(G, directed=False, indices=[b])[0]
+    g = np.where(np.isfinite(g), g, np.inf)
+    gmax = float(g[np.isfinite(g)].max())
+    mid = np.flatnonzero((g >= 0.45 * gmax) & (g <= 0.55 * gmax))
+    n_pieces = int(connected_components(G[mid][:, mid], directed=False)[0]) if len(mid) else 0
+    if n_pieces < 2:
+        return np.ones(len(X), dtype=bool), False
+    return g > cut_fraction * gmax, True
+
+
 def global_dimension(X: ArrayLike, d_max: int = 6, n_neighbors: int = 12, rel_tol: float = 0.25,
                      abs_tol: float = 1e-3, max_samples: int | None = 2000,
-                     seed: int = 0) -> DimensionEstimate:
+                     seed: int = 0, cut_loop: bool = False) -> DimensionEstimate:
     """Global intrinsic dimension from the Isomap residual-variance curve.
 
     For d = 1..d_max, ``rv(d) = 1 - R^2`` between the Isomap geodesic distances and
@@ -108,7 +151,10 @@ def global_dimension(X: ArrayLike, d_max: int = 6, n_neighbors: int = 12, rel_to
     max_samples : int or None, default=2000
         Random subsample size (Isomap needs O(n^2) memory and time).
     seed : int, default=0
-        Subsampling seed.
+        Subsampling seed (and the start point of the loop test).
+    cut_loop : bool, default=False
+        Test for a closed loop and cut it once before Isomap (:func:`loop_cut_mask`): a
+        closed curve then reads 1, not 2. ``details["loop_cut"]`` says whether it was cut.
 
     Returns
     -------
@@ -118,6 +164,9 @@ def global_dimension(X: ArrayLike, d_max: int = 6, n_neighbors: int = 12, rel_to
     if d_max < 1:
         raise ValueError(f"d_max must be >= 1, got {d_max}")
     X, info = _prepare(X, max(n_neighbors + 2, d_max + 2), max_samples, seed)
+    if cut_loop:
+        keep, info["loop_cut"] = loop_cut_mask(X, n_neighbors, seed=seed)
+        X = X[keep]
     d_max = min(d_max, X.shape[1])
     graph = kneighbors_graph(X, n_neighbors, mode="connectivity")
     n_comp = int(connected_components(graph, directed=False)[0])

@@ -11,6 +11,7 @@ from localization.intrinsic_dim import (
     global_dimension,
     intrinsic_dimension_table,
     local_dimension,
+    loop_cut_mask,
     pointwise_dimension,
 )
 from localization.synthetic import curved_3manifold, helix, swiss_roll
@@ -98,3 +99,34 @@ def test_bad_parameters():
         pointwise_dimension(X, aggregate="mode")
     with pytest.raises(ValueError, match="d_max"):
         global_dimension(X, d_max=0)
+
+
+def closed_curve(n: int = 1500, ambient: int = 50, seed: int = 0) -> np.ndarray:
+    """A smooth closed curve (a wobbly circle) linearly embedded in R^ambient, with noise."""
+    rng = np.random.default_rng(seed)
+    t = rng.uniform(0, 2 * np.pi, n)
+    base = np.c_[np.cos(t), np.sin(t), 0.3 * np.cos(2 * t), 0.2 * np.sin(3 * t),
+                 0.1 * np.cos(5 * t), 0.1 * np.sin(4 * t)]
+    return base @ rng.normal(size=(6, ambient)) + 0.01 * rng.normal(size=(n, ambient))
+
+
+def test_loop_cut_makes_a_closed_curve_read_one():
+    X = closed_curve()
+    plain = global_dimension(X)
+    assert plain.value == 2.0 and "loop_cut" not in plain.details  # a circle needs R^2
+    cut = global_dimension(X, cut_loop=True)
+    assert cut.value == 1.0 and cut.details["loop_cut"] is True
+    keep, is_loop = loop_cut_mask(X)
+    assert is_loop and 0.8 * len(X) < keep.sum() < len(X)
+
+
+@pytest.mark.parametrize(("make", "true"), [(lambda: helix(1000, seed=0)[0], 1),
+                                            (lambda: swiss_roll(1000, seed=0)[0], 2)])
+def test_loop_cut_leaves_open_manifolds_alone(make, true):
+    est = global_dimension(make(), cut_loop=True)
+    assert est.details["loop_cut"] is False and est.value == true
+
+
+def test_loop_cut_bad_fraction():
+    with pytest.raises(ValueError, match="cut_fraction"):
+        loop_cut_mask(helix(100, seed=0)[0], cut_fraction=0.5)
