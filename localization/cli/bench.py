@@ -55,6 +55,7 @@ from localization.workflows.benchmarks.env import EnvBenchConfig
 from localization.workflows.benchmarks.filter import FilterBenchConfig
 from localization.workflows.benchmarks.global_loc import GlobalBenchConfig
 from localization.workflows.benchmarks.gse import GSEBenchConfig
+from localization.workflows.benchmarks.noise_models import NoiseBenchConfig
 from localization.workflows.benchmarks.parallel import ParallelBenchConfig
 from localization.workflows.kidnap_eval import FILTERS
 from localization.workflows.sim import CAMERAS, CONDITION_NAMES, LANE_SETS, MODES, NORMALIZATIONS
@@ -85,6 +86,8 @@ class Args:
         "help": "localization anywhere on the streets at any heading, off-lane drives"})
     parallel: ParallelBenchConfig = field(default_factory=ParallelBenchConfig, metadata={
         "help": "collection on one process, local processes and Ray, side by side"})
+    noise: NoiseBenchConfig = field(default_factory=NoiseBenchConfig, metadata={
+        "help": "global against heteroscedastic measurement noise R under each condition"})
 
 
 def _check_env_bench(c: EnvBenchConfig) -> None:
@@ -168,10 +171,21 @@ def _check_parallel_bench(c: ParallelBenchConfig) -> None:
     check_output_dir("parallel_out_dir", c.out_dir)
 
 
+def _check_noise_bench(c: NoiseBenchConfig) -> None:
+    check_int_list("noise_cities", c.cities, minimum=0)
+    check_choices("noise_conditions", c.conditions, CONDITION_NAMES)
+    check_choice("noise_lanes", c.lanes, ["route", "streets"])
+    check_choice("noise_normalize", c.normalize, NORMALIZATIONS)
+    check_numbers(c, positive=("n_train", "image_size", "n_components", "n_drive", "n_drives",
+                               "drive_steps", "noise_folds"),
+                  non_negative=("motion_noise", "seed"), prefix="noise_")
+    check_output_dir("noise_out_dir", c.out_dir)
+
+
 CHECKS = {"env": _check_env_bench, "gse": _check_gse_bench, "filter": _check_filter_bench,
           "agents": _check_agents_bench, "global": _check_global_bench,
           "appearance": _check_appearance_bench, "coverage": _check_coverage_bench,
-          "parallel": _check_parallel_bench}
+          "parallel": _check_parallel_bench, "noise": _check_noise_bench}
 
 
 def _config(args: Args, name: str) -> object:

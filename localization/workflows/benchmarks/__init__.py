@@ -37,6 +37,7 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "appearance": ("appearance", "AppearanceBenchConfig", "run_appearance_bench"),
     "coverage": ("coverage", "CoverageBenchConfig", "run_coverage_bench"),
     "parallel": ("parallel", "ParallelBenchConfig", "run_parallel_bench"),
+    "noise": ("noise_models", "NoiseBenchConfig", "run_noise_bench"),
 }
 
 

@@ -1,7 +1,7 @@
 """Global against heteroscedastic measurement noise (issue 14): the EKF's mean NEES on the
 same recorded drives with one R per model and with R(theta) (docs/method.md §15.4).
 
-    python -m localization.workflows.benchmarks.noise_models --cities 31,32 --n-drives 4
+    appearance-nav bench --only noise --noise-cities 31,32 --noise-n-drives 4
     # 345 s wall at load 3.9-4.7 (2 cores, shared); the table is in docs/benchmarks.md §8
 
 On each city the daylight localizer of the appearance benchmark (:mod:`.appearance`) is
@@ -20,7 +20,6 @@ chi-square 95 % band (:func:`~localization.workflows.tracking.nees_band`), for b
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import time
@@ -64,8 +63,8 @@ class NoiseBenchConfig:
     noise_folds: int = field(default=5, metadata={
         "help": "K-fold refits of the heteroscedastic scale (3 split city 12's graph)"})
     seed: int = field(default=0, metadata={"help": "seed of the fit and the drives"})
-    out: str = field(default="results/bench_noise_models.json", metadata={
-        "help": "JSON output"})
+    out_dir: str = field(default="results", metadata={
+        "help": "where bench_noise.json/.md go"})
 
 
 def make_env(args: NoiseBenchConfig, city: int, conditions: str = "default") -> gym.Env:
@@ -121,7 +120,7 @@ def summarize(runs: list[dict[str, float]]) -> dict[str, Any]:
 
 
 def run_noise_bench(args: NoiseBenchConfig) -> dict[str, Any]:
-    """Run the comparison; write ``args.out`` (JSON) and print a markdown table."""
+    """Run the comparison; write ``bench_noise.json`` / ``.md`` to ``out_dir``; return it."""
     t0 = time.perf_counter()
     cities = [int(c) for c in args.cities.split(",")]
     conditions = [c.strip() for c in args.conditions.split(",")]
@@ -142,9 +141,10 @@ def run_noise_bench(args: NoiseBenchConfig) -> dict[str, Any]:
     summary = {key: {n: summarize(r[n]) for n in NOISE_MODELS} for key, r in runs.items()}
     result = {"args": dataclasses.asdict(args), "seconds": time.perf_counter() - t0,
               "summary": summary, "runs": runs}
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2))
+    out = Path(args.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "bench_noise.json").write_text(json.dumps(result, indent=2))
+    (out / "bench_noise.md").write_text(markdown(result) + "\n")
     print(markdown(result))
     return result
 
@@ -160,15 +160,3 @@ def markdown(result: dict[str, Any]) -> str:
                 for r in (g, h)]
         lines.append(f"| {key} | [{lo:.2f}, {hi:.2f}] | {cell[0]} | {cell[1]} |")
     return "\n".join(lines)
-
-
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    for f in dataclasses.fields(NoiseBenchConfig):
-        parser.add_argument(f"--{f.name.replace('_', '-')}", type=type(f.default),
-                            default=f.default, help=f.metadata["help"])
-    run_noise_bench(NoiseBenchConfig(**vars(parser.parse_args(argv))))
-
-
-if __name__ == "__main__":
-    main()

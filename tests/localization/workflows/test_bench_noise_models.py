@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from localization.workflows.benchmarks import noise_models
+from localization.cli._args import UsageError
+from localization.cli.bench import Args, check
+from localization.workflows.benchmarks import BENCHMARKS, benchmark, noise_models
 from localization.workflows.benchmarks.noise_models import NoiseBenchConfig, markdown, summarize
 from localization.workflows.tracking import nees_band
 
@@ -23,8 +25,19 @@ def test_summary_pools_drives_against_the_band_of_their_number():
     assert "| 31/default |" in table and "8.00 (out)" in table and "4.00 |" in table
 
 
-def test_command_line_options_reach_the_settings(monkeypatch):
-    seen = {}
-    monkeypatch.setattr(noise_models, "run_noise_bench", lambda args: seen.update(a=args))
-    noise_models.main(["--cities", "21,22", "--n-drives", "2", "--motion-noise", "0.2"])
-    assert seen["a"] == NoiseBenchConfig(cities="21,22", n_drives=2, motion_noise=0.2)
+@pytest.mark.parametrize("field, value, option", [
+    ("cities", "31,x", "--noise-cities"),
+    ("conditions", "default,dawn", "--noise-conditions"),
+    ("lanes", "free", "--noise-lanes"),
+    ("n_drives", 0, "--noise-n-drives"),
+])
+def test_bad_options_are_named(field, value, option):
+    args = Args(only="noise", noise=NoiseBenchConfig(**{field: value}))
+    with pytest.raises(UsageError, match=option):
+        check(args)
+
+
+def test_registered_for_bench_only_noise():
+    assert "noise" in BENCHMARKS
+    config, run = benchmark("noise")
+    assert config is NoiseBenchConfig and run is noise_models.run_noise_bench
