@@ -49,6 +49,11 @@ def test_quick_run_writes_the_tables_and_figures(quick_run: Path) -> None:
     report = json.loads((quick_run / "results.json").read_text())
     assert set(report["table1"]) == {"perspective", "fisheye", "catadioptric"}
     assert set(report["table1_random"]) == {"perspective", "fisheye", "catadioptric"}
+    # the route's global estimate on 5 subsamples (loop cut), the random data's on one
+    assert all(len(t["global_seeds"]) == 5 and t["global"] == t["global_seeds"][0]
+               for t in report["table1"].values())
+    assert all(len(t["global_seeds"]) == 1 for t in report["table1_random"].values())
+    assert "(1 in " in tables
     # 3 cameras x 2 data sets x 3 feature extractors x 3 methods
     assert len(report["table2"]) == 54
     route = [r for r in report["table2"] if r["dataset"] == "route"]
