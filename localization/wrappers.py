@@ -52,11 +52,13 @@ FILTERS = ("ekf", "particles")
 LOCALIZE = ("image", "global")
 #: filter_options each filter takes (the rest of its settings are BeliefWrapper's arguments)
 FILTER_OPTIONS = {
-    "ekf": ("detect_divergence", "alpha", "inflate_factor"),
+    "ekf": ("detect_divergence", "alpha", "inflate_factor", "noise"),
     "particles": ("n_particles", "resample_threshold", "resample", "alpha", "alpha_slow",
-                  "alpha_fast", "injection_ratio", "max_injection", "n_neighbors",
-                  "proposal_noise", "global_proposal_fraction", "sample_free", "lost_ratio",
-                  "doubt_ratio", "confident_weight", "mode_radius", "heading_scale", "seed"),
+                  "alpha_fast", "injection_ratio", "max_injection", "ambiguous_injection",
+                  "n_neighbors", "proposal_noise", "global_proposal_fraction", "sample_free",
+                  "lost_ratio", "doubt_ratio", "confident_weight", "confirm_share",
+                  "confirm_steps", "mode_radius", "heading_scale", "max_modes",
+                  "min_mode_weight", "track_mode", "seed"),
 }
 
 
@@ -154,7 +156,7 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
     filter_options : dict, optional
         More settings of the filter (``FILTER_OPTIONS[filter]``): for "ekf"
         ``detect_divergence`` (True or DivergenceMonitor settings), ``alpha``,
-        ``inflate_factor``; for "particles" ParticleBelief's (``n_particles``, ...,
+        ``inflate_factor``, ``noise`` ("heteroscedastic": R(x, w), method §15.4); for "particles" ParticleBelief's (``n_particles``, ...,
         ``sample_free``: default poses along the map's streets, from
         ``env.unwrapped.city.street_graph()``; ``seed``: default from ``reset(seed=...)``).
 

@@ -10,7 +10,8 @@ log-weights ``l_i``; with the names of the code::
     AMCL:     w_avg = sum_i w_i L_i / sum_i w_i  (i over the particles not injected last step)
               w_slow += alpha_slow (w_avg - w_slow),  w_fast += alpha_fast (w_avg - w_fast)
               inject p = min(max_injection, max(0, 1 - w_fast / (injection_ratio w_slow)))
-              of the particles at the image's proposals
+              of the particles at the image's proposals; max(p, ambiguous_injection) while
+              the dominant mode is unconfirmed
     resample: when ESS = 1 / sum w_i^2 < resample_threshold N, or particles are injected
 
 (k the localizer's ``control_gain_``, a its calibrated ``consistency(measurement)``;
@@ -45,6 +46,7 @@ from localization.filtering.particle_motion import (
     predict_particles,
     sample_body_noise,
 )
+from localization.filtering.resampling import seeded_resample
 from localization.geometry import Array, wrap_angle
 
 __all__ = ["PARTICLE_STATUSES", "ParticleBelief"]
@@ -55,7 +57,7 @@ RESET_MODES = ("image", "global")
 #: "doubtful": this image alone is far less likely than usual (w_avg < doubt_ratio w_slow:
 #: an outlier frame, or the first sign of a kidnap), or (``track_mode``) the reported EKF
 #: holds its pose against most particles;
-#: "relocalizing": particles injected this step; "ambiguous": the dominant mode holds less
+#: "relocalizing": Augmented MCL injected particles this step; "ambiguous": the dominant mode holds less
 #: than ``confident_weight``, or no image has confirmed it since the particles were seeded
 #: from images (``confirm_share``); "tracking": otherwise.
 PARTICLE_STATUSES = ("initial", "tracking", "ambiguous", "doubtful", "relocalizing", "lost",
@@ -392,18 +394,10 @@ class ParticleBelief:
             self.status = "doubtful"
 
     def _resample(self, log_w: Array, n_inject: int, w: Array) -> None:
-        """Resample by ``self.resample`` and replace ``n_inject`` random particles by
-        proposals of the image. filterpy's schemes draw from numpy's global generator: it
-        is seeded from ``self.rng`` for the call and restored afterwards."""
+        """Resample by ``self.resample`` (:func:`seeded_resample`) and replace ``n_inject``
+        random particles by proposals of the image."""
         p = np.exp(log_w - logsumexp(log_w))
-        p /= p.sum()
-        state = np.random.get_state()
-        try:
-            np.random.seed(int(self.rng.integers(2 ** 32)))
-            idx = np.asarray(self.resample(p), dtype=np.intp)
-        finally:
-            np.random.set_state(state)
-        idx = np.minimum(idx, len(p) - 1)  # a cumulative sum a hair below 1
+        idx = seeded_resample(self.resample, p / p.sum(), self.rng)
         X = self.particles[idx]
         self._fresh = np.zeros(len(X), dtype=bool)
         if n_inject > 0:

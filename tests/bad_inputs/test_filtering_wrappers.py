@@ -183,6 +183,11 @@ CASES += [
     Case("bw-pf-options-key", lambda ctx: BeliefWrapper(
         ctx.env, ctx.localizer, filter="particles", filter_options={"detect_divergence": True}),
          V, "detect_divergence"),
+    Case("bw-ekf-noise", lambda ctx: BeliefWrapper(
+        ctx.env, ctx.localizer, filter_options={"noise": "robust"}), V, "noise"),
+    Case("bw-pf-min-mode-weight", lambda ctx: BeliefWrapper(
+        ctx.env, ctx.localizer, filter="particles", filter_options={"min_mode_weight": 0.0}), V,
+         "min_mode_weight"),
     Case("bw-pf-particles-0", lambda ctx: BeliefWrapper(
         ctx.env, ctx.localizer, filter="particles", filter_options={"n_particles": 0}), V,
          "n_particles"),

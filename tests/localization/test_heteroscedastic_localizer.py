@@ -141,3 +141,19 @@ def test_an_unfamiliar_frame_inflates_R(hetero, drive):
     ok = np.isfinite(day) & np.isfinite(dark)
     assert ok.mean() > 0.9
     assert np.median(dark[ok] / day[ok]) > 1.5
+
+
+def test_belief_wrapper_takes_the_heteroscedastic_filter(hetero):
+    """``BeliefWrapper(filter_options={"noise": "heteroscedastic"})`` runs the EKF on R(x, w)
+    and tracks the route it was fitted on (city 0's first lane)."""
+    from localization.wrappers import BeliefWrapper
+    from tests.localization.test_wrappers import start_pose
+
+    loc, _ = hetero
+    env = BeliefWrapper(make_env(), loc, filter_options={"noise": "heteroscedastic"})
+    assert env.belief.noise == "heteroscedastic"
+    obs, info = env.reset(seed=3, options={"pose": start_pose(env)})
+    for _ in range(8):
+        obs, _, _, _, info = env.step([0.5, 0.0])
+    assert np.hypot(*(obs["pose_mean"][:2] - info["pose"][:2])) < 1.0
+    env.close()

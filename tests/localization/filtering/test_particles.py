@@ -144,6 +144,42 @@ def test_image_seeded_modes_stay_ambiguous_until_an_image_agrees(localizer, feat
     assert pf._proposals.agreement(W[k], poses[far], 1.0, 2.0) == 0.0
 
 
+def test_unconfirmed_modes_keep_drawing_from_the_images_proposals(localizer, features):
+    """Augmented MCL injects only while the likelihood falls; a wrong twin does not make it
+    fall. While unconfirmed, ``ambiguous_injection`` of the particles come from the image's
+    proposals every step, without calling it relocalizing or restarting the confirmation;
+    once confirmed, none do."""
+    W, poses, _ = features
+    k = 20  # its image's neighbours agree with poses[k] (see the test above)
+    pf = _belief(localizer, max_injection=0.0, ambiguous_injection=0.2, track_mode=False)
+    pf.reset(W[k], x0=poses[k])
+    pf.confirmed = False  # as after an injection
+    rng = np.random.default_rng(3)
+    pf._set(poses[k] + rng.normal(0.0, [0.05, 0.05, 0.01], (pf.n_particles, 3)))
+    _, status = pf.step([0.0, 0.0], W[k])
+    assert 0.1 * pf.n_particles < pf.injected < 0.3 * pf.n_particles
+    assert status == "ambiguous" and not pf.confirmed and pf._agreeing == 1
+    _, status = pf.step([0.0, 0.0], W[k])
+    assert pf.confirmed and status == "tracking"
+    pf.step([0.0, 0.0], W[k])
+    assert pf.injected == 0
+
+
+def test_mode_summary_goes_down_to_min_mode_weight(localizer, features):
+    """Sixteen places, one holding 0.27 % of the weight: listed above ``min_mode_weight``."""
+    W, poses, _ = features
+    pf = _belief(localizer, n_particles=1600, track_mode=False)
+    pf.reset(W[0], x0=poses[0])
+    X = np.repeat(np.column_stack([np.arange(16) * 5.0, np.zeros(16), np.zeros(16)]), 100, 0)
+    log_w = np.log(np.where(np.arange(1600) < 100, 0.04, 1.0))  # place 0: 0.27 % of the weight
+    pf._set(X, log_w)
+    assert len(pf.hypotheses["weights"]) == 16
+    assert pf.hypotheses["weights"][-1] == pytest.approx(0.04 / 15.04)
+    pf.min_mode_weight = 0.01
+    pf._set(X, log_w)
+    assert len(pf.hypotheses["weights"]) == 15
+
+
 def test_heading_mean_near_pi_is_on_the_circle():
     rng = np.random.default_rng(0)
     yaw = wrap_angle(np.pi + rng.normal(0.0, 0.05, 2000))  # half near +pi, half near -pi
@@ -194,6 +230,9 @@ def test_tracks_the_drive_it_was_fitted_with(localizer, features):
     ({"confirm_share": 1.5}, ValueError, "confirm_share"),
     ({"confirm_steps": 0}, ValueError, "confirm_steps"),
     ({"max_modes": 0}, ValueError, "max_modes"),
+    ({"min_mode_weight": 0.0}, ValueError, "min_mode_weight"),
+    ({"min_mode_weight": 1.0}, ValueError, "min_mode_weight"),
+    ({"ambiguous_injection": 1.5}, ValueError, "ambiguous_injection"),
 ])
 def test_bad_arguments_raise_clear_errors(localizer, kwargs, error, match):
     with pytest.raises(error, match=match):
