@@ -57,7 +57,7 @@ FILTER_OPTIONS = {
                   "alpha_fast", "injection_ratio", "max_injection", "ambiguous_injection",
                   "n_neighbors", "proposal_noise", "global_proposal_fraction", "sample_free",
                   "lost_ratio", "doubt_ratio", "confident_weight", "confirm_share",
-                  "confirm_steps", "mode_radius", "heading_scale", "max_modes",
+                  "confirm_steps", "unconfirm_steps", "mode_radius", "heading_scale", "max_modes",
                   "min_mode_weight", "track_mode", "seed"),
 }
 

@@ -92,11 +92,10 @@ class ParticleBelief:
         Cap of the injected fraction per step (0: never inject).
     ambiguous_injection : float in [0, 1]
         While the dominant mode is unconfirmed (see ``confirm_share``), at least this share
-        of the particles is replaced each step by the image's proposals. Augmented MCL
-        injects only while the likelihood falls, and it does not fall on a wrong twin of a
-        look-alike place: resampling then drops the other twins, the truth among them. The
-        steady share keeps every place the images point to until a landmark confirms one.
-        It does not count as relocalizing, nor restart the confirmation.
+        of the particles is replaced each step by the image's proposals, so that every
+        place the images point to keeps particles until a landmark confirms one (Augmented
+        MCL does not inject on a wrong twin: the likelihood does not fall there). It does
+        not count as relocalizing, nor restart the confirmation.
     n_neighbors : int
         Training images retrieved as proposals.
     proposal_noise : array_like (3, 3), optional
@@ -107,29 +106,22 @@ class ParticleBelief:
         ``sample_free(n, rng) -> (n, 3)`` free poses for a global start; default the
         localizer's training poses (jittered by ``proposal_noise``).
     lost_ratio, doubt_ratio, confident_weight : float
-        Status thresholds (see ``PARTICLE_STATUSES``). ``doubt_ratio`` 0.02 was chosen on
-        tuning cities 11-13: 78 % of the steps more than 1 m off after a kidnap fall below
-        it, 1.9 % of the steps of nominal drives.
-    confirm_share : float in [0, 1]; confirm_steps : int
+        Status thresholds (see ``PARTICLE_STATUSES``).
+    confirm_share : float in [0, 1]; confirm_steps : int; unconfirm_steps : int or None
         Particles seeded from images (a start without a pose, an injection) are a guess the
-        images can repeat in every place that looks alike, and resampling can gather them
-        on one of those places: the dominant mode is confirmed once the images' retrieved
-        neighbours agree with it, at least ``confirm_share`` of them within ``mode_radius``
-        on ``confirm_steps`` frames in a row; until then the status is at best
-        "ambiguous". Chosen on tuning cities 11-16: at the true pose 72-80 % of the street
-        cities' frames reach 0.5, 4-30 % of the look-alike cities' (landmark views); one
-        frame let a chance cluster of neighbours confirm a wrong twin for 20 steps, two in
-        a row kept every wrong-twin claim to 12 steps or fewer (68 kidnaps) and confirm
-        the truth in the street cities after a median of 1 frame (p90 5-17).
+        images can repeat in every place that looks alike: the dominant mode is confirmed
+        once at least ``confirm_share`` of the image's retrieved neighbours lie within
+        ``mode_radius`` of it on ``confirm_steps`` frames in a row (until then the status is
+        at best "ambiguous"), and loses it after ``unconfirm_steps`` frames in a row
+        without (None: never).
     mode_radius, heading_scale : float
         Mode kernel (m) and metres per radian (:func:`~localization.filtering._modes.find_modes`).
     max_modes : int; min_mode_weight : float in (0, 1)
         At most ``max_modes`` hypotheses are summarised, down to ``min_mode_weight`` of
-        weight left (the rest of the weight is in none). A place in the look-alike cities
-        has up to 15 twins, and the steady injection scatters small modes among them. On
-        tuning cities 14-16 (with ``ambiguous_injection`` 0.1) the frames reported on a
-        wrong twin kept a hypothesis at the truth in 69 % of cases with 16 modes down to
-        0.01, 85 % with 32 down to 0.002 and 90 % with 64 (47 % without the injection).
+        weight left (the rest of the weight is in none).
+
+    Every default of the status, confirmation, injection and summary was chosen on tuning
+    cities 11-16 (14-16 look-alike); docs/method.md §13.2 gives the numbers.
     seed : int or None
         Seeds every draw (numpy Generator); the same seed gives the same run.
     """
@@ -144,7 +136,7 @@ class ParticleBelief:
                  global_proposal_fraction: float = 0.2, sample_free: SampleFree | None = None,
                  lost_ratio: float = 0.2, doubt_ratio: float = 0.02,
                  confident_weight: float = 0.8, confirm_share: float = 0.5,
-                 confirm_steps: int = 2,
+                 confirm_steps: int = 2, unconfirm_steps: int | None = 5,
                  mode_radius: float = 1.0, heading_scale: float = 2.0, max_modes: int = 64,
                  min_mode_weight: float = 0.002,
                  track_mode: bool | dict[str, Any] = True,
@@ -176,6 +168,8 @@ class ParticleBelief:
         self.confident_weight = check_real(confident_weight, "confident_weight", **unit)
         self.confirm_share = check_real(confirm_share, "confirm_share", **unit)
         self.confirm_steps = check_int(confirm_steps, "confirm_steps", low=1)
+        self.unconfirm_steps = None if unconfirm_steps is None else \
+            check_int(unconfirm_steps, "unconfirm_steps", low=1)
         self.resample, self.sample_free = resample, sample_free
         self.mode_radius, self.heading_scale = float(mode_radius), float(heading_scale)
         self.max_modes = check_int(max_modes, "max_modes", low=1)
@@ -209,6 +203,7 @@ class ParticleBelief:
         self._recovering = False  # Augmented MCL injected this step
         self.confirmed = False  # images agreed with the dominant mode since it was seeded
         self._agreeing = 0  # frames in a row whose neighbours agree with the dominant mode
+        self._disagreeing = 0  # ... and in a row that do not
         self._fresh = np.zeros(0, dtype=bool)  # particles injected at the last step
 
     # ------------------------------------------------------------------ state
@@ -315,8 +310,9 @@ class ParticleBelief:
             self.tracker.reset(w, self.modes[0], known=x0 is not None)
         self.amcl.reset()
         self.status, self.injected, self._recovering = "initial", 0, False
-        self._agreeing = 0
-        self.confirmed = x0 is not None or self._agrees(w)
+        self._agreeing = self._disagreeing = 0
+        self.confirmed = x0 is not None
+        self.confirmed = self._confirm(w)
         self._fresh = np.zeros(self.n_particles, dtype=bool)
         return self.status
 
@@ -376,7 +372,7 @@ class ParticleBelief:
         self.injected, self._recovering = n_inject, n_amcl > 0
         if self._recovering:
             self.confirmed, self._agreeing = False, 0
-        self.confirmed = self.confirmed or self._agrees(w)
+        self.confirmed = self._confirm(w)
         self.status = self._status(w_avg)
         self._track(u, w)
         return w_avg, self.status
@@ -407,12 +403,18 @@ class ParticleBelief:
             self._fresh[slots] = True
         self._set(X)
 
-    def _agrees(self, w: Array) -> bool:
-        """Have the images' retrieved neighbours agreed with the dominant mode on
-        ``confirm_steps`` frames in a row (this one the last)?"""
+    def _confirm(self, w: Array) -> bool:
+        """Is the dominant mode confirmed after this frame? Unconfirmed: once the image's
+        retrieved neighbours agreed with it on ``confirm_steps`` frames in a row (this one
+        the last); confirmed: until they disagree on ``unconfirm_steps`` in a row."""
+        if self.confirmed and self.unconfirm_steps is None:
+            return True
         ok = self._proposals.agreement(w, self.modes[0].mean, self.mode_radius,
                                        self.heading_scale) >= self.confirm_share
-        self._agreeing = self._agreeing + 1 if ok else 0
+        self._agreeing, self._disagreeing = (self._agreeing + 1, 0) if ok else \
+            (0, self._disagreeing + 1)
+        if self.confirmed:
+            return self._disagreeing < self.unconfirm_steps
         return self._agreeing >= self.confirm_steps
 
     def _status(self, w_avg: float) -> str:

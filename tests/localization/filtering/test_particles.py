@@ -153,7 +153,7 @@ def test_unconfirmed_modes_keep_drawing_from_the_images_proposals(localizer, fea
     k = 20  # its image's neighbours agree with poses[k] (see the test above)
     pf = _belief(localizer, max_injection=0.0, ambiguous_injection=0.2, track_mode=False)
     pf.reset(W[k], x0=poses[k])
-    pf.confirmed = False  # as after an injection
+    pf.confirmed, pf._agreeing = False, 0  # as after an injection
     rng = np.random.default_rng(3)
     pf._set(poses[k] + rng.normal(0.0, [0.05, 0.05, 0.01], (pf.n_particles, 3)))
     _, status = pf.step([0.0, 0.0], W[k])
@@ -163,6 +163,28 @@ def test_unconfirmed_modes_keep_drawing_from_the_images_proposals(localizer, fea
     assert pf.confirmed and status == "tracking"
     pf.step([0.0, 0.0], W[k])
     assert pf.injected == 0
+
+
+def test_a_confirmed_mode_the_images_stop_agreeing_with_loses_it(localizer, features):
+    """``unconfirm_steps`` frames in a row whose neighbours point elsewhere withdraw the
+    confirmation: the status says "ambiguous" again and the steady injection resumes."""
+    W, poses, _ = features
+    k = 20
+    far = int(np.argmax(np.hypot(*(poses[:, :2] - poses[k, :2]).T) > 3.0))
+    pf = _belief(localizer, max_injection=0.0, unconfirm_steps=3, track_mode=False)
+    pf.reset(W[k], x0=poses[k])
+    rng = np.random.default_rng(4)
+    for step, confirmed in enumerate((True, True, False)):  # W[k] does not point at far
+        pf._set(poses[far] + rng.normal(0.0, [0.05, 0.05, 0.01], (pf.n_particles, 3)))
+        _, status = pf.step([0.0, 0.0], W[k])
+        assert pf.confirmed is confirmed, step
+    assert status == "ambiguous" and pf.injected == 0  # injection starts next step
+    never = _belief(localizer, max_injection=0.0, unconfirm_steps=None, track_mode=False)
+    never.reset(W[k], x0=poses[k])
+    for _ in range(4):
+        never._set(poses[far] + rng.normal(0.0, [0.05, 0.05, 0.01], (pf.n_particles, 3)))
+        never.step([0.0, 0.0], W[k])
+    assert never.confirmed
 
 
 def test_mode_summary_goes_down_to_min_mode_weight(localizer, features):
@@ -233,6 +255,7 @@ def test_tracks_the_drive_it_was_fitted_with(localizer, features):
     ({"min_mode_weight": 0.0}, ValueError, "min_mode_weight"),
     ({"min_mode_weight": 1.0}, ValueError, "min_mode_weight"),
     ({"ambiguous_injection": 1.5}, ValueError, "ambiguous_injection"),
+    ({"unconfirm_steps": 0}, ValueError, "unconfirm_steps"),
 ])
 def test_bad_arguments_raise_clear_errors(localizer, kwargs, error, match):
     with pytest.raises(error, match=match):
