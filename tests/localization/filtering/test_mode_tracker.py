@@ -57,9 +57,11 @@ def test_a_strongly_contradicted_ekf_restarts_where_the_particles_are(localizer,
 
 def test_an_ekf_the_particles_left_restarts_after_max_unsupported_steps(localizer, features):
     """The particles (not the EKF) moved 6 m: the EKF's own images still agree with it, so
-    it holds (status "doubtful") for ``max_unsupported`` steps, then restarts there."""
+    it holds (status "doubtful") for ``max_unsupported`` steps, then restarts there. (With
+    ``unconfirm_steps`` the images soon withdraw the particles' confirmation and the steady
+    injection brings particles back to the EKF: the next test; here it is off.)"""
     W, poses, _controls = features
-    pf = _belief(localizer, max_injection=0.0)
+    pf = _belief(localizer, max_injection=0.0, unconfirm_steps=None)
     pf.reset(W[0], x0=poses[0])
     far = poses[0] + np.array([6.0, 0.0, 0.0])
     pf._set(_cloud(far, pf.n_particles))
@@ -70,6 +72,25 @@ def test_an_ekf_the_particles_left_restarts_after_max_unsupported_steps(localize
     pf.step(np.zeros(2), W[0])
     assert pf.tracker.source == "restarted" and pf.tracker.restarts == 1
     assert np.hypot(*(pf.pose_mean[:2] - far[:2])) < 0.5
+
+
+def test_images_that_withdraw_the_confirmation_bring_the_particles_back(localizer, features):
+    """The same move with the defaults: the images stop agreeing with the particles' mode,
+    which is unconfirmed after ``unconfirm_steps`` frames; the steady injection then seeds
+    particles where the images point (the EKF's pose), so the EKF keeps its support and is
+    never restarted at the particles' wrong place."""
+    W, poses, _controls = features
+    pf = _belief(localizer, max_injection=0.0)
+    pf.reset(W[0], x0=poses[0])
+    far = poses[0] + np.array([6.0, 0.0, 0.0])
+    pf._set(_cloud(far, pf.n_particles))
+    for _ in range(pf.tracker.max_unsupported + 5):
+        pf.step(np.zeros(2), W[0])
+    assert pf.tracker.source == "ekf" and pf.tracker.restarts == 0
+    assert np.hypot(*(pf.pose_mean[:2] - poses[0, :2])) < 0.5
+    # the heaviest mode came back to the images' side (measured 1.3 m from the EKF's pose)
+    mode = pf.modes[0].mean[:2]
+    assert np.hypot(*(mode - poses[0, :2])) < np.hypot(*(mode - far[:2])) / 2
 
 
 def test_a_condemned_ekf_and_two_distant_modes_report_the_heavier_mode(localizer, features):
