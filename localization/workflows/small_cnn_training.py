@@ -38,8 +38,12 @@ class SmallCNNTrainConfig:
         "help": "scene seed of the evaluation city; refused if among --city-seeds"})
     images_per_city: int = field(default=500, metadata={"help": "images collected per city"})
     mode: str = field(default="random", metadata={
-        "help": "envs.collect_dataset mode: grid, random or route"})
+        "help": "envs.collect_dataset mode: grid, random, route, lanes or coverage"})
     camera: str = field(default="perspective", metadata={"help": "env camera"})
+    conditions: str = field(default="default", metadata={
+        "help": "AppearanceNav-v0 conditions of the training images: a preset, or 'random' "
+                "(every image its own lighting, weather and camera effects: features that "
+                "carry across conditions)"})
     image_size: int = field(default=64, metadata={"help": "rendered image side (pixels)"})
     objective: str = field(default="pose_contrastive", metadata={
         "help": "self-supervised objective: autoencoder, contrastive or pose_contrastive "
@@ -100,6 +104,7 @@ def collect(args: SmallCNNTrainConfig, seeds: list[int]) -> tuple[np.ndarray, np
     batches, all_poses, groups = [], [], []
     for i, s in enumerate(seeds):
         env = gym.make("AppearanceNav-v0", scene_seed=s, camera=args.camera,
+                       conditions=args.conditions,
                        image_size=(args.image_size, args.image_size))
         try:
             images, poses = envs.collect_dataset(env, args.images_per_city, args.mode,
