@@ -49,6 +49,7 @@ from localization.cli._args import (
 )
 from localization.workflows.benchmarks import BENCHMARKS, benchmark
 from localization.workflows.benchmarks.agents import AgentsBenchConfig
+from localization.workflows.benchmarks.appearance import FEATURES as APPEARANCE_FEATURES
 from localization.workflows.benchmarks.appearance import TRAININGS, AppearanceBenchConfig
 from localization.workflows.benchmarks.coverage import CoverageBenchConfig
 from localization.workflows.benchmarks.env import EnvBenchConfig
@@ -148,6 +149,7 @@ def _check_appearance_bench(c: AppearanceBenchConfig) -> None:
     check_choices("appearance_conditions", c.conditions, CONDITION_NAMES)
     check_choices("appearance_trainings", c.trainings, TRAININGS)
     check_choice("appearance_normalize", c.normalize, NORMALIZATIONS)
+    check_choice("appearance_features", c.features, APPEARANCE_FEATURES)
     check_choice("appearance_lanes", c.lanes, LANE_SETS)
     check_numbers(c, positive=("image_size", "n_train", "n_drive", "n_components", "n_test",
                                "n_drives", "drive_steps"),

@@ -16,6 +16,8 @@ Stages:
 3. closed-loop tracking: for each measurement model drive ``steps`` steps of the route
    with a pure-pursuit controller on the belief mean, against dead reckoning; write
    ``<out>/track_<model>.png`` and print the results table (also ``<out>/demo.md``);
+   then the appearance stage (``dusk``): the same route driven at dusk (or another
+   ``conditions`` preset) on the daylight localizer, ``<out>/track_dusk.png``;
    then the kidnapping stage (``kidnap``): one unannounced kidnap on a street drive, the EKF
    and the particle belief side by side, ``<out>/kidnap.png``
    (:func:`localization.workflows.kidnap_demo.kidnap_demo`); then the episode video
@@ -71,6 +73,9 @@ class DemoConfig:
     n_drive: int = field(default=1000, metadata={"help": "steps of each noise drive"})
     steps: int = field(default=1000, metadata={"help": "steps of each tracking run"})
     start: int = field(default=0, metadata={"help": "tracking start (route path point)"})
+    dusk: str = field(default="dusk", metadata={
+        "help": "the appearance stage: one route drive under this conditions preset on the "
+                "daylight localizer, <out>/track_<preset>.png ('' to skip)"})
     kidnap: bool = field(default=True, metadata={
         "help": "the kidnapping stage: EKF and particle belief through one unannounced kidnap"})
     video: bool = field(default=True, metadata={
@@ -121,6 +126,25 @@ def _video(args: DemoConfig, loc: AppearanceLocalizer, out: Path, seconds: dict)
     return video
 
 
+def _appearance(args: DemoConfig, loc: AppearanceLocalizer, out: Path) -> dict:
+    """The appearance stage: the tracking route under ``args.dusk`` on the daylight
+    localizer ("representation" model), as the tracking stage drives it in daylight."""
+    env = gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, camera=args.camera,
+                   conditions=args.dusk, image_size=(args.image_size, args.image_size),
+                   motion_noise=args.motion_noise, max_episode_steps=None)
+    try:
+        run = track_route(env, loc, "representation", args.steps, start=args.start,
+                          seed=args.seed + 7)
+        env.unwrapped.set_pose(run.true[0])
+        png = plot_track(run, env.unwrapped.render(), env.unwrapped.city.bounds,
+                         out / f"track_{args.dusk}.png",
+                         title=f"{args.dusk}, on the localizer fitted in daylight")
+    finally:
+        env.close()
+    return {"measurement": f"representation, {args.dusk}", **track_metrics(run),
+            "png": str(png)}
+
+
 def run_demo(args: DemoConfig) -> dict:
     """Run the four stages; write the dataset, the localizer, PNGs, ``demo.md`` and
     ``demo.json`` to ``args.out``; return the summary of ``demo.json``."""
@@ -160,6 +184,12 @@ def run_demo(args: DemoConfig) -> dict:
         print(f"[demo] {name}: RMSE {m['rmse']:.3f} m vs dead reckoning "
               f"{m['rmse_dead_reckoning']:.2f} m", flush=True)
     seconds["track"] = time.perf_counter() - t1
+    if args.dusk:
+        t1 = time.perf_counter()
+        rows.append(_appearance(args, loc, out))
+        seconds["appearance"] = time.perf_counter() - t1
+        print(f"[demo] {rows[-1]['measurement']}: RMSE {rows[-1]['rmse']:.3f} m vs dead "
+              f"reckoning {rows[-1]['rmse_dead_reckoning']:.2f} m; {rows[-1]['png']}", flush=True)
     kidnap = {}
     if args.kidnap:
         t1 = time.perf_counter()

@@ -44,6 +44,12 @@ class SmallCNNTrainConfig:
         "help": "AppearanceNav-v0 conditions of the training images: a preset, or 'random' "
                 "(every image its own lighting, weather and camera effects: features that "
                 "carry across conditions)"})
+    looks_per_pose: int = field(default=1, metadata={
+        "help": "with --conditions random: render every pose this many times, each in its own "
+                "look (the copies are each other's nearest poses: pose_contrastive positives "
+                "under other lighting and weather)"})
+    n_neighbors: int = field(default=4, metadata={
+        "help": "pose_contrastive: positives drawn from this many pose-nearest images"})
     image_size: int = field(default=64, metadata={"help": "rendered image side (pixels)"})
     objective: str = field(default="pose_contrastive", metadata={
         "help": "self-supervised objective: autoencoder, contrastive or pose_contrastive "
@@ -95,6 +101,23 @@ def synthetic_images(n: int, size: int, seed: int) -> tuple[np.ndarray, np.ndarr
     return out, poses
 
 
+def other_looks(env: object, images: np.ndarray, poses: np.ndarray, looks: int
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """``images`` (n, H, W, 3) and ``looks - 1`` more renders of each pose, each in the next
+    look of the env's randomised conditions: (n * looks, H, W, 3) and their poses."""
+    if looks <= 1:
+        return images, poses
+    base = env.unwrapped
+    extra = np.empty((looks - 1, *images.shape), np.uint8)
+    for i, pose in enumerate(poses):
+        base.set_pose(pose)
+        for j in range(looks - 1):
+            base.set_conditions()
+            extra[j, i] = base.render_camera()
+    return (np.concatenate([images, extra.reshape(-1, *images.shape[1:])]),
+            np.tile(poses, (looks, 1)))
+
+
 def collect(args: SmallCNNTrainConfig, seeds: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Images, poses and city seeds from ``gymnasium.make("AppearanceNav-v0", scene_seed=s)``."""
     import gymnasium as gym
@@ -109,6 +132,7 @@ def collect(args: SmallCNNTrainConfig, seeds: list[int]) -> tuple[np.ndarray, np
         try:
             images, poses = envs.collect_dataset(env, args.images_per_city, args.mode,
                                                  args.seed * 100_003 + s)
+            images, poses = other_looks(env, images, poses, args.looks_per_pose)
         finally:
             env.close()
         batches.append(np.asarray(images, dtype=np.uint8))
@@ -128,6 +152,11 @@ def train_small_cnn_job(args: SmallCNNTrainConfig, command: str = "") -> Path:
         If the evaluation city is among the training cities.
     """
     seeds = parse_seeds(args.city_seeds)
+    if args.looks_per_pose < 1:
+        raise ValueError(f"looks_per_pose must be >= 1, got {args.looks_per_pose}")
+    if args.looks_per_pose > 1 and args.conditions != "random":
+        raise ValueError(f"looks_per_pose={args.looks_per_pose} renders each pose in several "
+                         f"looks and needs conditions='random', got {args.conditions!r}")
     if args.eval_seed in seeds:
         raise ValueError(f"eval_seed: the eval city {args.eval_seed} is among the training "
                          f"cities {seeds}")
@@ -142,7 +171,8 @@ def train_small_cnn_job(args: SmallCNNTrainConfig, command: str = "") -> Path:
     model = train_small_cnn(images, args.epochs, args.seed, objective=args.objective,
                             embedding_dim=args.embedding_dim, width=args.width,
                             input_size=args.image_size, batch_size=args.batch_size, lr=args.lr,
-                            poses=poses, groups=groups, num_threads=args.num_threads)
+                            poses=poses, groups=groups, n_neighbors=args.n_neighbors,
+                            num_threads=args.num_threads)
     t_train = time.perf_counter() - t0 - t_collect
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

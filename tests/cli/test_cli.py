@@ -89,6 +89,7 @@ BAD = [
     ("demo --n-route 0", "--n-route"),
     ("demo --strip 0", "--strip"),
     ("demo --lanes sideways", "--lanes"),
+    ("demo --dusk noon", "--dusk"),
     ("demo --episodes -1", "--episodes"),
     ("demo --steps 0", "--steps"),
     ("demo --n-train 0", "--n-train"),

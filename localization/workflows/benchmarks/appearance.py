@@ -64,11 +64,13 @@ from localization.workflows.tracking import (
     track_streets,
 )
 
-__all__ = ["THRESHOLDS", "AppearanceBenchConfig", "OcclusionRecorder", "run_appearance_bench"]
+__all__ = ["FEATURES", "THRESHOLDS", "AppearanceBenchConfig", "OcclusionRecorder", "run_appearance_bench"]
 
 #: (metres, degrees) of the visual-localization benchmarks
 THRESHOLDS = ((0.25, 2.0), (0.5, 5.0), (5.0, 10.0))
 TRAININGS = {"daylight": "default", "randomised": "random"}
+#: feature extractors the benchmark compares (``--appearance-features``)
+FEATURES = ("pixel_pca", "small_cnn")
 
 
 @dataclass
@@ -89,7 +91,12 @@ class AppearanceBenchConfig:
     motion_noise: float = field(default=0.1, metadata={"help": "env actuation noise"})
     n_train: int = field(default=6000, metadata={"help": "lane training images per city"})
     n_drive: int = field(default=1500, metadata={"help": "steps of each noise-calibration drive"})
-    n_components: int = field(default=64, metadata={"help": "PixelPCA components"})
+    features: str = field(default="pixel_pca", metadata={
+        "help": "pixel_pca (PixelPCA, see --appearance-normalize) or small_cnn (the packaged "
+                "SmallCNN trained on cities 100-119 under randomised conditions, "
+                "localization.features.weights)"})
+    n_components: int = field(default=64, metadata={
+        "help": "PixelPCA components (small_cnn: PCA components of its embedding)"})
     normalize: str = field(default="channels", metadata={
         "help": "PixelPCA illumination normalisation (localization.features.pixel_pca): "
                 "'channels' was chosen by this benchmark over 'none' (see the README)"})
@@ -160,18 +167,36 @@ def make_env(args: AppearanceBenchConfig, city: int, conditions: str) -> gym.Env
                     motion_noise=args.motion_noise, max_episode_steps=None)
 
 
+def localizer_params(args: AppearanceBenchConfig) -> dict[str, Any]:
+    """The :class:`AppearanceLocalizer` feature settings of ``args.features``."""
+    if args.features == "small_cnn":
+        from localization.features.weights import small_cnn_weights
+
+        weights = small_cnn_weights("perspective", "conditions")
+        return {"features": "small_cnn",
+                "features_params": {"n_components": args.n_components, "weights": str(weights)}}
+    params: dict[str, Any] = {"n_components": args.n_components}
+    if args.normalize != "none":
+        params["normalize"] = args.normalize
+    return {"features_params": params}
+
+
+def features_label(args: AppearanceBenchConfig) -> str:
+    """The feature extractor in the report's words."""
+    if args.features == "small_cnn":
+        return f"SmallCNN (condition-randomised, other cities; PCA {args.n_components})"
+    return f"PixelPCA({args.n_components}, normalize={args.normalize})"
+
+
 def fit(args: AppearanceBenchConfig, city: int, training: str) -> Any:
     """The localizer ``training`` ("daylight" or "randomised") of ``city``."""
     env = make_env(args, city, TRAININGS[training])
-    params = {"n_components": args.n_components}
-    if args.normalize != "none":
-        params["normalize"] = args.normalize
     with warnings.catch_warnings():  # GSE's eigen-gap warning on a thin tube of poses
         warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
         warnings.filterwarnings("ignore", message=".*quality.*")
         loc, _ = fit_city_localizer(
             env, n_train=args.n_train, lanes=args.lanes, n_drive=args.n_drive, seed=args.seed,
-            localizer_params={"features_params": params}, calibrate_on_belief=False,
+            localizer_params=localizer_params(args), calibrate_on_belief=False,
             measurements=("representation",), quality_steps=0)
     env.close()
     return loc
@@ -272,8 +297,8 @@ def run_appearance_bench(args: AppearanceBenchConfig) -> dict[str, Any]:
               "summary": summary, "drives": drives, "fit_failures": failures,
               "setup": f"cities {args.cities}, {args.lanes} lanes, "
                        f"{args.image_size}x{args.image_size} images, "
-                       f"motion noise {args.motion_noise}, PixelPCA({args.n_components}, "
-                       f"normalize={args.normalize}) on {args.n_train} lane images per city; "
+                       f"motion noise {args.motion_noise}, {features_label(args)} "
+                       f"on {args.n_train} lane images per city; "
                        f"{args.n_test} test images and {args.n_drives} drive(s) of "
                        f"{args.drive_steps} steps per city and condition"}
     (out / "bench_appearance.json").write_text(json.dumps(result, indent=2))

@@ -53,6 +53,7 @@ def test_targets_are_the_issues():
     ("conditions", "default,dawn", "--appearance-conditions"),
     ("trainings", "daylight,nightly", "--appearance-trainings"),
     ("normalize", "gamma", "--appearance-normalize"),
+    ("features", "resnet", "--appearance-features"),
     ("cities", "31,x", "--appearance-cities"),
     ("n_test", 0, "--appearance-n-test"),
 ])
@@ -85,3 +86,13 @@ def test_quick_run_end_to_end(tmp_path: Path):
         assert saved["summary"][t]["default"]["occluded_frames"] == 0.0
         assert saved["summary"][t]["traffic"]["occluded_frames"] > 0.0  # movers were seen
     assert "Aachen Day-Night" in table
+
+
+def test_quick_run_on_the_condition_randomised_small_cnn(tmp_path: Path):
+    run_appearance_bench(AppearanceBenchConfig(quick=True, trainings="daylight",
+                                               features="small_cnn", out_dir=str(tmp_path)))
+    saved = json.loads((tmp_path / "bench_appearance.json").read_text())
+    assert "SmallCNN (condition-randomised" in saved["setup"]
+    s = saved["summary"]["daylight"]["default"]
+    assert s["n_images"] == 30 and s["within"] == sorted(s["within"])
+    assert math.isfinite(s["rmse"]) and s["rmse"] > 0

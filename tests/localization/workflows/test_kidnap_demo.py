@@ -24,3 +24,16 @@ def test_kidnap_stage_writes_the_figure_and_measures_both_filters(localizer, tmp
     assert steps["ekf"] is None or steps["ekf"] > steps["particles"], steps
     # both filters start at the true pose and track the route lanes they were trained on
     assert all(np.isfinite(r) and r < 1.0 for r in out["rmse_before"].values()), out
+
+
+def test_appearance_stage_drives_the_route_at_dusk_on_the_daylight_localizer(localizer,
+                                                                              tmp_path):
+    from localization.workflows.demo import DemoConfig, _appearance
+
+    args = DemoConfig(image_size=32, motion_noise=0.05, steps=60, seed=3, dusk="dusk",
+                      out=str(tmp_path))
+    row = _appearance(args, localizer, tmp_path)
+    assert (tmp_path / "track_dusk.png").stat().st_size > 10_000
+    assert row["measurement"] == "representation, dusk" and row["steps"] == 60
+    assert np.isfinite(row["rmse"]) and np.isfinite(row["rmse_dead_reckoning"])
+    assert 0.0 <= row["accepted"] <= 1.0
