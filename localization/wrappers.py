@@ -166,9 +166,10 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
     the free streets and the image's proposals; EKF: the training poses' spread until the
     images agree); the other options go to the env. ``info`` gets ``nis`` (NaN when none was
     computed; always NaN for particles), ``nis_dof``, ``measurement_status`` (the filter's
-    own status), ``belief_status`` ("tracking", "ambiguous", "lost" or "relocalizing",
-    :data:`~localization.filtering.divergence.BELIEF_STATUSES`; particles also "doubtful":
-    this image disagrees with the belief), ``hypotheses``
+    own status), ``belief_status`` ("tracking", "ambiguous", "doubtful", "lost" or
+    "relocalizing", :data:`~localization.filtering.divergence.BELIEF_STATUSES`; "doubtful":
+    this image alone disagrees with the belief, from the particles or the EKF with
+    ``detect_divergence``), ``hypotheses``
     (``{"weights": (k,), "means": (k, 3)}``, heaviest first; one for the EKF) and ``nees``
     (from ``info["pose"]``, for evaluation only).
     """

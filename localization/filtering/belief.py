@@ -20,7 +20,7 @@ accepted measurement the belief restarts from psi* of the current image, as at t
 Divergence detection (``detect_divergence``, :mod:`localization.filtering.divergence`): a
 windowed NIS test and psi*'s disagreement with the belief mark it "lost" and, both together,
 restart it within a few steps at the pose the window's images agree on. ``belief_status``
-says what the belief knows about itself ("tracking", "lost", "relocalizing"; see
+says what the belief knows about itself ("tracking", "doubtful", "lost", "relocalizing"; see
 ``BELIEF_STATUSES``); a start with ``mode="global"`` (unknown pose) is "relocalizing" from
 the training poses' spread until the images agree.
 
@@ -160,7 +160,7 @@ class BeliefFilter:
         self.monitor = _monitor(detect_divergence)
         self.belief_status = "tracking"
         self._confirm = 0
-        self._forced = self._lost_now = False
+        self._forced = self._lost_now = self._doubtful_now = False
 
     @property
     def x(self) -> Array:
@@ -261,7 +261,7 @@ class BeliefFilter:
             if (self.relocalize_after is not None and self.misses >= self.relocalize_after
                     and self._from_image(w)):
                 status = "relocalized"
-        self._lost_now = False
+        self._lost_now = self._doubtful_now = False
         if status == "relocalized":
             self.belief_status = "relocalizing"
         elif self.monitor is not None:
@@ -281,7 +281,7 @@ class BeliefFilter:
                 verdict.restart, verdict.restart_cov, w):
             self.belief_status = "relocalizing"
             return "relocalized"
-        self._lost_now = verdict.lost
+        self._lost_now, self._doubtful_now = verdict.lost, verdict.doubtful
         return status
 
     def _restart_explains(self, x0: Array, P0: Array, w: Array) -> bool:
@@ -303,7 +303,8 @@ class BeliefFilter:
     def _update_status(self, status: str) -> None:
         """"relocalizing" until ``CONFIRM_STEPS`` accepted measurements; otherwise "lost"
         while the monitor says so or after ``LOST_AFTER_MISSES`` steps in a row without an
-        accepted measurement, else "tracking"."""
+        accepted measurement, "doubtful" on a step whose image alone contradicts the belief
+        (the monitor's ``doubt_nis``), else "tracking"."""
         if status == "relocalized":
             return
         if self.belief_status == "relocalizing":
@@ -312,7 +313,8 @@ class BeliefFilter:
                 self.belief_status = "tracking"
             return
         lost = self._lost_now or self.misses >= LOST_AFTER_MISSES
-        self.belief_status = "lost" if lost else "tracking"
+        self.belief_status = "lost" if lost else "doubtful" if self._doubtful_now \
+            else "tracking"
 
     def _observe(self, w: Array) -> None:
         """Tell a measurement model whose R depends on the image (``observe(w)``, e.g. the

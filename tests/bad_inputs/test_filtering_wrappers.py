@@ -203,6 +203,15 @@ CASES += [
     Case("bw-detect-window", lambda ctx: BeliefWrapper(
         ctx.env, ctx.localizer, filter_options={"detect_divergence": {"window": 1}}), V,
          "window"),
+    Case("bw-detect-strong-nis", lambda ctx: BeliefWrapper(
+        ctx.env, ctx.localizer, filter_options={"detect_divergence": {"strong_nis": 0.0}}), V,
+         "strong_nis"),
+    Case("bw-detect-sustained", lambda ctx: BeliefWrapper(
+        ctx.env, ctx.localizer, filter_options={"detect_divergence": {"sustained_steps": 0}}),
+         V, "sustained_steps"),
+    Case("bw-detect-doubt", lambda ctx: BeliefWrapper(
+        ctx.env, ctx.localizer, filter_options={"detect_divergence": {"doubt_nis": -1.0}}), V,
+         "doubt_nis"),
     Case("bw-detect-key", lambda ctx: BeliefWrapper(
         ctx.env, ctx.localizer, filter_options={"detect_divergence": {"windw": 8}}), T,
          "detect_divergence"),

@@ -1,0 +1,81 @@
+"""DivergenceMonitor's graded evidence: one bad image is doubt, an aliased run is not a
+restart, a strong or sustained contradiction restarts where the images agree."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from localization.filtering.divergence import DivergenceMonitor
+
+X = np.zeros(3)
+P = np.diag([0.01, 0.01, 0.001])
+FAR = np.array([6.0, 0.0, 0.0])  # psi* 6 m from the belief: disagrees
+NEAR = np.array([0.05, 0.0, 0.0])
+
+
+class Still:
+    """A motion model for a robot at rest: F(X, U) = X."""
+
+    def predict_many(self, X, u):
+        return X
+
+
+def feed(monitor, steps, nis, psi, rejected):
+    """``steps`` steps as BeliefFilter runs them: the stored proposals move (and age), then
+    the step is observed."""
+    verdicts = []
+    for _ in range(steps):
+        monitor.move_proposals(Still(), np.zeros(2))
+        verdicts.append(monitor.observe(nis, 3, psi, X, P, rejected))
+    return verdicts
+
+
+def test_one_bad_image_is_doubt_not_lost():
+    m = DivergenceMonitor()
+    feed(m, 8, 1.5, NEAR, False)
+    v, = feed(m, 1, 5000.0, NEAR, True)
+    assert v.doubtful and not v.lost and v.restart is None
+    assert not feed(m, 1, 1.5, NEAR, False)[0].lost
+
+
+def test_an_aliased_run_says_lost_but_does_not_restart():
+    """Eight rejected images whose psi* agree elsewhere, NIS ~200 (the longest nominal run on
+    the tuning cities): lost, never restarted."""
+    m = DivergenceMonitor()
+    feed(m, 8, 1.5, NEAR, False)
+    verdicts = feed(m, 8, 200.0, FAR, True)
+    assert verdicts[-1].lost
+    assert all(v.restart is None for v in verdicts)
+
+
+def test_a_strong_contradiction_restarts_at_the_agreeing_images():
+    m = DivergenceMonitor()
+    feed(m, 8, 1.5, NEAR, False)
+    verdicts = feed(m, 6, 3000.0, FAR, True)
+    first = next(i for i, v in enumerate(verdicts) if v.restart is not None)
+    assert first == 5  # the 6th: min_rejected (0.75) of the 8-step window
+    np.testing.assert_allclose(verdicts[first].restart, FAR, atol=1e-9)
+    assert np.all(np.linalg.eigvalsh(verdicts[first].restart_cov) > 0)
+
+
+def test_a_sustained_contradiction_restarts_whatever_its_nis():
+    m = DivergenceMonitor(sustained_steps=12)
+    feed(m, 8, 1.5, NEAR, False)
+    verdicts = feed(m, 12, 40.0, FAR, True)
+    assert all(v.restart is None for v in verdicts[:11])
+    assert verdicts[11].restart is not None
+
+
+def test_an_accepted_image_breaks_the_sustained_run():
+    m = DivergenceMonitor(sustained_steps=12)
+    feed(m, 8, 40.0, FAR, True)
+    feed(m, 1, 2.0, FAR, False)  # accepted
+    assert all(v.restart is None for v in feed(m, 11, 40.0, FAR, True))
+
+
+@pytest.mark.parametrize("name, value", [("strong_nis", 0.0), ("strong_steps", 0),
+                                         ("sustained_steps", 0), ("doubt_nis", np.nan)])
+def test_bad_settings_are_named(name, value):
+    with pytest.raises((ValueError, TypeError), match=name):
+        DivergenceMonitor(**{name: value})
