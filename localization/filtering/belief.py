@@ -17,9 +17,11 @@ measurements through (one moved a belief 2.5 m sideways). An isolated outlier (e
 corrupted image) changes nothing. After ``relocalize_after`` steps in a row without an
 accepted measurement the belief restarts from psi* of the current image, as at the start.
 
-Divergence detection (``detect_divergence``, :mod:`localization.filtering.divergence`): a
-windowed NIS test and psi*'s disagreement with the belief mark it "lost" and, both together,
-restart it within a few steps at the pose the window's images agree on. ``belief_status``
+Divergence detection (``detect_divergence``, :mod:`localization.filtering.divergence`; off
+here by default, on in ``BeliefWrapper``): one contradicting image or the window's chi-square
+NIS test make it "doubtful", a strong contradiction or psi*'s disagreement with the belief
+"lost", and both together restart it within a few steps at the pose the window's images
+agree on. ``belief_status``
 says what the belief knows about itself ("tracking", "doubtful", "lost", "relocalizing"; see
 ``BELIEF_STATUSES``); a start with ``mode="global"`` (unknown pose) is "relocalizing" from
 the training poses' spread until the images agree.

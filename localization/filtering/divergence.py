@@ -43,10 +43,12 @@ against 0.086 m) and called it "lost" on 5 % of the steps (the scripted agent st
 "lost"). With ``strong_nis=500`` and ``sustained_steps=12``: no false restart, "lost" on 1.1 %
 of nominal steps, every kidnap restarted within 3 steps of the first strong frame.
 
-Off by default (``BeliefFilter(detect_divergence=False)``, the wrapper's
-``filter_options={"detect_divergence": True}`` turns it on); ``appearance-nav bench --only
-global`` measures it beside the EKF without it and the particle belief (docs/benchmarks.md
-§5).
+``BeliefWrapper(filter="ekf")`` turns it on by default (``filter_options={"detect_divergence":
+False}`` turns it off); a bare ``BeliefFilter`` (the noise calibration's) runs without it
+unless given ``detect_divergence``. ``appearance-nav bench --only global`` (held-out cities
+21-24, docs/benchmarks.md §5) measures it beside the EKF without it and the particle belief:
+nominal RMSE 0.065 m as without it, 98 % of 120 kidnaps recovered within 30 steps (median 5),
+every lost step admitted, 93 % of the kidnapped scripted agent's goals (80 % without).
 """
 
 from __future__ import annotations

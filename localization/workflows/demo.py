@@ -19,7 +19,8 @@ Stages:
    then the appearance stage (``dusk``): the same route driven at dusk (or another
    ``conditions`` preset) on the daylight localizer, ``<out>/track_dusk.png``;
    then the kidnapping stage (``kidnap``): one unannounced kidnap on a street drive, the EKF
-   and the particle belief side by side, ``<out>/kidnap.png``
+   without and with divergence detection and the particle belief side by side,
+   ``<out>/kidnap.png``
    (:func:`localization.workflows.kidnap_demo.kidnap_demo`); then the episode video
    (``video``): the scripted agent on the particle belief through a kidnap,
    ``<out>/episode.mp4`` (:func:`localization.workflows.episode_video.episode_video`;
@@ -77,7 +78,8 @@ class DemoConfig:
         "help": "the appearance stage: one route drive under this conditions preset on the "
                 "daylight localizer, <out>/track_<preset>.png ('' to skip)"})
     kidnap: bool = field(default=True, metadata={
-        "help": "the kidnapping stage: EKF and particle belief through one unannounced kidnap"})
+        "help": "the kidnapping stage: the EKFs and the particle belief through one "
+                "unannounced kidnap"})
     video: bool = field(default=True, metadata={
         "help": "the episode video: the scripted agent on the particle belief through a "
                 "kidnap, <out>/episode.mp4"})

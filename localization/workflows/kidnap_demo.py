@@ -32,6 +32,8 @@ from localization.workflows.kidnap_eval import (
 __all__ = ["kidnap_demo", "plot_kidnap"]
 
 P0 = np.diag([0.01, 0.01, 0.001])
+LABELS = {"ekf": "EKF without detection", "ekf_detect": "EKF (divergence detection)",
+          "particles": "particles"}
 
 
 def _particle_run(localizer: Any, motion_model: Any, drive: KidnapDrive, snapshots: list[int],
@@ -83,22 +85,24 @@ def plot_kidnap(top_down: Array, bounds: tuple[float, float], drive: KidnapDrive
 
 def kidnap_demo(env: gym.Env, localizer: Any, out: str | Path, seed: int = 0,
                 steps_before: int = 100, steps_after: int = 150) -> dict[str, Any]:
-    """Record one kidnap drive on ``env`` and replay it through the EKF and the particle
+    """Record one kidnap drive on ``env`` and replay it through the EKF without divergence
+    detection ("ekf"), with it ("ekf_detect", ``BeliefWrapper``'s default) and the particle
     belief; write ``<out>/kidnap.png``; return the steps each filter took to recover (None:
     not within the drive) and the figure's path."""
     drive = record_kidnap_drive(env, localizer, steps_before, steps_after, seed=seed)
     k = drive.kidnap if drive.kidnap is not None else steps_before
     snapshots = [k - 1, k + 2, k + 8, len(drive.controls)]
     motion = env.unwrapped.motion_model
-    ekf_means, _, _ = run_filter("ekf", drive, localizer, motion)
-    pf_means, shots = _particle_run(localizer, motion, drive, snapshots, seed)
-    errors = {name: np.hypot(*(m[:, :2] - drive.poses[:, :2]).T)
-              for name, m in (("EKF", ekf_means), ("particles", pf_means))}
+    means = {name: run_filter(name, drive, localizer, motion)[0]
+             for name in ("ekf", "ekf_detect")}
+    means["particles"], shots = _particle_run(localizer, motion, drive, snapshots, seed)
+    errors = {LABELS[name]: np.hypot(*(m[:, :2] - drive.poses[:, :2]).T)
+              for name, m in means.items()}
     env.unwrapped.set_pose(drive.poses[-1])
     png = plot_kidnap(env.unwrapped.render(), env.unwrapped.city.bounds, drive, errors, shots,
                       Path(out) / "kidnap.png")
     return {"kidnap_step": k, "png": str(png),
-            "steps_to_recover": {"ekf": steps_to_recover(ekf_means, drive.poses, k),
-                                 "particles": steps_to_recover(pf_means, drive.poses, k)},
+            "steps_to_recover": {name: steps_to_recover(m, drive.poses, k)
+                                 for name, m in means.items()},
             "rmse_before": {name: float(np.sqrt(np.mean(e[:k] ** 2)))
                             for name, e in errors.items()}}

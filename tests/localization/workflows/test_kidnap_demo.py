@@ -18,10 +18,12 @@ def test_kidnap_stage_writes_the_figure_and_measures_both_filters(localizer, tmp
     assert (tmp_path / "kidnap.png").stat().st_size > 10_000
     assert out["kidnap_step"] == 41
     steps = out["steps_to_recover"]
-    assert set(steps) == {"ekf", "particles"}
-    # measured on this drive: particles 2 steps, the EKF 46 (its 50-step restart)
+    assert set(steps) == {"ekf", "ekf_detect", "particles"}
+    # measured on this drive: particles 6 steps, the EKF with detection 10, without 46 (its
+    # 50-step restart)
     assert steps["particles"] is not None and steps["particles"] <= 10, steps
     assert steps["ekf"] is None or steps["ekf"] > steps["particles"], steps
+    assert steps["ekf_detect"] is not None and steps["ekf_detect"] < (steps["ekf"] or 99), steps
     # both filters start at the true pose and track the route lanes they were trained on
     assert all(np.isfinite(r) and r < 1.0 for r in out["rmse_before"].values()), out
 
