@@ -155,9 +155,9 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         :class:`~localization.localizer.OtherCityError`: the maps would alias silently).
     filter_options : dict, optional
         More settings of the filter (``FILTER_OPTIONS[filter]``): for "ekf"
-        ``detect_divergence`` (default True: the EKF notices when it is lost and restarts
-        where the images agree, method §13.1; False: the EKF without it, or a dict of
-        DivergenceMonitor settings), ``alpha``,
+        ``detect_divergence`` (True: the EKF notices when it is lost and restarts where
+        the images agree, method §13.1, or a dict of DivergenceMonitor settings; default
+        False), ``alpha``,
         ``inflate_factor``, ``noise`` ("heteroscedastic": R(x, w), method §15.4); for "particles" ParticleBelief's (``n_particles``, ...,
         ``sample_free``: default poses along the map's streets, from
         ``env.unwrapped.city.street_graph()``; ``seed``: default from ``reset(seed=...)``).
@@ -201,7 +201,6 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         self.filter = filter
         mm = env.unwrapped.motion_model
         if filter == "ekf":
-            options.setdefault("detect_divergence", True)
             self.belief: BeliefFilter | ParticleBelief = BeliefFilter(
                 localizer, mm, measurement, gate_probability, relocalize_after,
                 inflate_after=inflate_after, **options)

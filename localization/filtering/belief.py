@@ -18,7 +18,7 @@ corrupted image) changes nothing. After ``relocalize_after`` steps in a row with
 accepted measurement the belief restarts from psi* of the current image, as at the start.
 
 Divergence detection (``detect_divergence``, :mod:`localization.filtering.divergence`; off
-here by default, on in ``BeliefWrapper``): one contradicting image or the window's chi-square
+by default): one contradicting image or the window's chi-square
 NIS test make it "doubtful", a strong contradiction or psi*'s disagreement with the belief
 "lost", and both together restart it within a few steps at the pose the window's images
 agree on. ``belief_status``
@@ -79,10 +79,11 @@ def check_localizer(localizer: object) -> Localizer:
     return localizer  # type: ignore[return-value]
 
 
-STATUSES = ("initial", "accepted", "gated", "out_of_domain", "relocalized")
+STATUSES = ("initial", "accepted", "gated", "out_of_domain", "relocalized", "reverted")
 NOISE_MODELS = ("global", "heteroscedastic")
 RESET_MODES = ("image", "global")
 CONFIRM_STEPS = 3  # accepted measurements after a restart before the status is "tracking"
+TRIAL_STEPS = 5  # a divergence restart must have CONFIRM_STEPS accepted within these, or undo
 LOST_AFTER_MISSES = 5  # steps in a row without an accepted measurement: "lost"
 MAX_HEADING_STD = 0.5  # rad: heading inflation stops there
 
@@ -163,6 +164,7 @@ class BeliefFilter:
         self.belief_status = "tracking"
         self._confirm = 0
         self._forced = self._lost_now = self._doubtful_now = False
+        self._trial: dict[str, Any] | None = None  # the EKF a restart replaced, on trial
 
     @property
     def x(self) -> Array:
@@ -242,7 +244,8 @@ class BeliefFilter:
         -------
         nis : float
             NaN when no NIS was computed (out of domain).
-        status : "accepted", "gated", "out_of_domain" or "relocalized"
+        status : "accepted", "gated", "out_of_domain", "relocalized" or "reverted" (a
+            divergence restart undone: the images after it did not confirm it)
         """
         self._check()
         assert self.ekf is not None
@@ -266,6 +269,9 @@ class BeliefFilter:
         self._lost_now = self._doubtful_now = False
         if status == "relocalized":
             self.belief_status = "relocalizing"
+            self._trial = None
+        elif self._trial is not None:
+            status = self._on_trial(u, w, status)
         elif self.monitor is not None:
             status = self._watch(u, w, nis, status)
         self._update_status(status)
@@ -300,7 +306,37 @@ class BeliefFilter:
             ok = False
         if not ok and not forced:
             self.ekf, (self.misses, self.gated) = prior, kept
+        elif ok and not forced and prior is not None:
+            self._trial = {"ekf": prior, "misses": kept[0], "steps": 0, "accepted": 0}
         return ok or forced  # an unknown start takes the agreed place either way
+
+    def _on_trial(self, u: ArrayLike, w: Array, status: str) -> str:
+        """A divergence restart on trial: the EKF it replaced runs on beside it (same F, same
+        measurements); unless the restarted one has ``CONFIRM_STEPS`` accepted measurements
+        within ``TRIAL_STEPS`` steps with a measurement (out-of-domain steps do not count),
+        the replaced one comes back ("reverted"): a run of aliased images can agree on a
+        wrong place, and the images that follow do not."""
+        trial = self._trial
+        assert trial is not None and self.ekf is not None
+        old: PoseEKF = trial["ekf"]
+        old.predict(self.gain * np.asarray(u, dtype=np.float64))
+        z = self.localizer.measure(w, self.measurement)
+        try:
+            took = bool(np.all(np.isfinite(z))) and old.update(z, self.model).accepted
+        except OutOfDomainError:
+            took = False
+        trial["misses"] = 0 if took else trial["misses"] + 1
+        trial["steps"] += status != "out_of_domain"  # an image off the maps tells nothing
+        trial["accepted"] += status == "accepted"
+        if trial["accepted"] >= CONFIRM_STEPS or trial["steps"] < TRIAL_STEPS:
+            self._trial = None if trial["accepted"] >= CONFIRM_STEPS else trial
+            return status
+        self._trial = None
+        self.ekf, self.misses, self.gated = old, trial["misses"], 0
+        self.belief_status = "tracking"
+        if self.monitor is not None:
+            self.monitor.clear()
+        return "reverted"
 
     def _update_status(self, status: str) -> None:
         """"relocalizing" until ``CONFIRM_STEPS`` accepted measurements; otherwise "lost"
@@ -308,6 +344,9 @@ class BeliefFilter:
         accepted measurement, "doubtful" on a step whose image alone contradicts the belief
         (the monitor's ``doubt_nis``), else "tracking"."""
         if status == "relocalized":
+            return
+        if status == "reverted":
+            self.belief_status = "doubtful"
             return
         if self.belief_status == "relocalizing":
             self._confirm += status == "accepted" and not self._forced

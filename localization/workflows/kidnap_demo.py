@@ -86,7 +86,7 @@ def plot_kidnap(top_down: Array, bounds: tuple[float, float], drive: KidnapDrive
 def kidnap_demo(env: gym.Env, localizer: Any, out: str | Path, seed: int = 0,
                 steps_before: int = 100, steps_after: int = 150) -> dict[str, Any]:
     """Record one kidnap drive on ``env`` and replay it through the EKF without divergence
-    detection ("ekf"), with it ("ekf_detect", ``BeliefWrapper``'s default) and the particle
+    detection ("ekf", ``BeliefWrapper``'s default), with it ("ekf_detect") and the particle
     belief; write ``<out>/kidnap.png``; return the steps each filter took to recover (None:
     not within the drive) and the figure's path."""
     drive = record_kidnap_drive(env, localizer, steps_before, steps_after, seed=seed)

@@ -104,7 +104,7 @@ def plot_track(run: TrackResult, top_down: np.ndarray, bounds: tuple[float, floa
     status = np.array(run.status)
     ok = status == "accepted"
     a3.plot(t[ok], run.nis[ok], ".", ms=2, color="tab:gray", label="NIS (accepted)")
-    rej = np.isin(status, ("gated", "out_of_domain", "relocalized"))
+    rej = np.isin(status, ("gated", "out_of_domain", "relocalized", "reverted"))
     a3.plot(t[rej], np.where(np.isfinite(run.nis[rej]), run.nis[rej], 1e3), "x", ms=3,
             color="tab:orange", label=f"rejected ({rej.sum()})")
     lo_d, hi_d = chi2.ppf([0.025, 0.975], run.nis_dof)

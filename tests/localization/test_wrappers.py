@@ -72,7 +72,8 @@ def test_each_measurement_model_runs(localizer, measurement):
     assert set(obs) == KEYS | {"image"}
     for _ in range(15):
         obs, _, _, _, info = env.step([0.5, 0.0])
-        assert info["measurement_status"] in ("accepted", "gated", "out_of_domain", "relocalized")
+        assert info["measurement_status"] in ("accepted", "gated", "out_of_domain", "relocalized",
+                                              "reverted")
         assert np.isfinite(info["nees"]) and np.all(np.isfinite(obs["pose_mean"]))
         P = triu_to_cov(obs["pose_cov"])
         assert np.all(np.linalg.eigvalsh(P) > 0)

@@ -79,3 +79,50 @@ def test_an_accepted_image_breaks_the_sustained_run():
 def test_bad_settings_are_named(name, value):
     with pytest.raises((ValueError, TypeError), match=name):
         DivergenceMonitor(**{name: value})
+
+
+# ---------------------------------------------------------------- a restart on trial
+START = 60  # the plain EKF accepts every image of the shared drive from here to step 200
+def test_a_restart_the_images_do_not_confirm_is_undone(localizer, drive):
+    """A divergence restart at a wrong place (3 m off) with the replaced, right EKF on
+    trial beside it: the next images are gated at the wrong place and accepted at the right
+    one, so within TRIAL_STEPS measured steps the right EKF comes back ("reverted")."""
+    from localization.filtering.belief import TRIAL_STEPS, BeliefFilter
+    from tests.localization.conftest import make_env
+
+    images, poses, controls = drive
+    W = localizer.transform(images)
+    env = make_env()
+    f = BeliefFilter(localizer, env.unwrapped.motion_model, detect_divergence=True)
+    env.close()
+    f.reset(W[0], poses[0], P)
+    for t in range(1, START):
+        f.step(controls[t - 1], W[t])
+    right, misses = f.ekf, f.misses
+    f._start(f.x + np.array([3.0, 0.0, 0.0]), P)  # what a restart at aliased images does
+    f._trial = {"ekf": right, "misses": misses, "steps": 0, "accepted": 0}
+    f.belief_status = "relocalizing"
+    statuses = [f.step(controls[t - 1], W[t])[1] for t in range(START, START + 3 * TRIAL_STEPS)]
+    assert "reverted" in statuses, statuses
+    assert np.hypot(*(f.x[:2] - poses[START + 3 * TRIAL_STEPS - 1, :2])) < 0.5
+
+
+def test_a_restart_the_images_confirm_stands(localizer, drive):
+    from localization.filtering.belief import TRIAL_STEPS, BeliefFilter
+    from tests.localization.conftest import make_env
+
+    images, poses, controls = drive
+    W = localizer.transform(images)
+    env = make_env()
+    f = BeliefFilter(localizer, env.unwrapped.motion_model, detect_divergence=True)
+    env.close()
+    f.reset(W[0], poses[0], P)
+    for t in range(1, START):
+        f.step(controls[t - 1], W[t])
+    wrong = BeliefFilter(localizer, f.motion_model)
+    wrong.reset(W[START - 1], poses[START - 1] + np.array([3.0, 0.0, 0.0]), P)  # the replaced EKF: lost
+    f._trial = {"ekf": wrong.ekf, "misses": 20, "steps": 0, "accepted": 0}
+    f.belief_status = "relocalizing"
+    statuses = [f.step(controls[t - 1], W[t])[1] for t in range(START, START + 3 * TRIAL_STEPS)]
+    assert "reverted" not in statuses and f._trial is None, statuses
+    assert np.hypot(*(f.x[:2] - poses[START + 3 * TRIAL_STEPS - 1, :2])) < 0.5
