@@ -204,7 +204,8 @@ class DivergenceMonitor:
                     and float(np.mean(self._disagree)) >= self.disagree_fraction)
         lost = forced or strong or disagree
         doubtful = bool(np.isfinite(nis) and nis > self.doubt_nis) or self._nis_high(dim_z)
-        rejecting = float(np.mean(self._rejected)) >= self.min_rejected
+        rejecting = (len(self._rejected) == self.window  # a full window of evidence
+                     and float(np.mean(self._rejected)) >= self.min_rejected)
         sustained = self._contradicted >= self.sustained_steps
         if (forced or sustained or (strong and disagree and rejecting)) \
                 and len(self._proposals) >= self.window // 2:
