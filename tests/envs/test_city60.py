@@ -70,7 +70,7 @@ def test_textures_keep_the_default_texel_and_the_clip_planes_cover_the_city(env6
 
 def test_60m_city_renders_views_and_map(env60):
     base = env60.unwrapped
-    obs, _ = env60.reset(seed=0)
+    env60.reset(seed=0)
     c = base.city.street_centers
     images = []
     for x, y, yaw in ((c[0], c[0], 0.0), (c[5], c[9], -np.pi / 2), (c[9], c[4], np.pi)):
