@@ -35,7 +35,7 @@ test: setup
 
 # the agents benchmark needs the localizer that make demo writes
 bench: setup
-	$(NAV) bench --only env,gse,filter,global,appearance,coverage,parallel,noise
+	$(NAV) bench --only env,gse,filter,global,appearance,coverage,parallel,noise,city60
 	@test -f results/localizer.npz || $(NAV) demo
 	$(NAV) bench --only agents
 

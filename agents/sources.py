@@ -33,10 +33,20 @@ from envs.lanes import lane_poses
 from localization._validation import check_choice, check_options, check_real, check_seed
 from localization.wrappers import BeliefWrapper, DeadReckoningWrapper, OracleWrapper
 
-__all__ = ["POSE_SOURCES", "STARTS", "LaneStart", "make_pose_env"]
+__all__ = ["AGENT_STEPS_PER_METRE", "POSE_SOURCES", "STARTS", "LaneStart", "agent_episode_steps",
+           "make_pose_env"]
 
 POSE_SOURCES = ("oracle", "belief", "dead_reckoning")
 STARTS = ("lane", "random")
+#: the agents' default episode limit per metre of city side (400 steps in the default city)
+AGENT_STEPS_PER_METRE = 20.0
+
+
+def agent_episode_steps(city_size: float) -> int:
+    """The agents' default episode limit: ``round(AGENT_STEPS_PER_METRE * city_size)`` steps
+    (400 for the default 20 m city, 1200 for a 60 m one)."""
+    return max(1, round(AGENT_STEPS_PER_METRE * check_real(city_size, "city_size", low=0.0,
+                                                           low_open=True)))
 
 
 class LaneStart(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -75,9 +85,9 @@ class LaneStart(gym.Wrapper, gym.utils.RecordConstructorArgs):
 def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None = None,
                   scene_seed: int = 0, camera: str = "perspective",
                   image_size: tuple[int, int] = (64, 64), motion_noise: float = 0.1,
-                  max_episode_steps: int = 400, start: str = "lane",
+                  max_episode_steps: int | None = None, start: str = "lane",
                   kidnap_at: tuple[int, ...] = (), city_layout: str = "random",
-                  **belief_kwargs: Any) -> gym.Env:
+                  city_size: float = 20.0, **belief_kwargs: Any) -> gym.Env:
     """``AppearanceNav-v0`` with the named pose source (see the module docstring).
 
     Parameters
@@ -88,9 +98,12 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
         "belief" (the measurement maps and Q) and "dead_reckoning" (Q).
     measurement : str, optional
         The belief's measurement model (default: BeliefWrapper's).
-    scene_seed, camera, image_size, motion_noise, max_episode_steps
+    scene_seed, camera, image_size, motion_noise, city_size
         Passed to ``gymnasium.make("AppearanceNav-v0", ...)``; the localizer's noise model
         holds for the motion noise it was fitted with (0.1 in ``make demo``).
+    max_episode_steps : int, optional
+        Episode truncation; default :data:`AGENT_STEPS_PER_METRE` per metre of city side
+        (400 for the default 20 m city, 1200 for a 60 m one).
     start : {"lane", "random"}
         Start episodes on a street lane (:class:`LaneStart`) or anywhere free (the env's own).
     kidnap_at : tuple of int
@@ -108,9 +121,12 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
         _check_localizer(localizer, source)
     if belief_kwargs and source != "belief":
         raise ValueError(f"belief settings {sorted(belief_kwargs)} apply to source 'belief' only")
+    if max_episode_steps is None:
+        max_episode_steps = agent_episode_steps(city_size)
     env = gym.make("AppearanceNav-v0", scene_seed=scene_seed, camera=camera,
                    image_size=check_image_size(image_size), motion_noise=motion_noise,
-                   max_episode_steps=max_episode_steps, city_layout=city_layout)
+                   max_episode_steps=max_episode_steps, city_layout=city_layout,
+                   city_size=city_size)
     if start == "lane":
         env = LaneStart(env)
     if kidnap_at:

@@ -64,7 +64,10 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         "catadioptric" when ``envs.cube_camera`` is present).
     image_size : (H, W) ints in [16, 1024].
     max_episode_steps : int or None
-        Truncate after this many steps (``None``: never; ``gymnasium.make`` adds a ``TimeLimit``).
+        Truncate after this many steps (``None``: never). ``gymnasium.make`` adds its own
+        limit: ``envs.episode_steps(city_size)`` (25 steps per metre of city side: 500 for
+        the default city, 1500 for a 60 m one; :class:`envs.time_limit.CityTimeLimit`), or
+        its ``TimeLimit(N)`` for ``gymnasium.make(..., max_episode_steps=N)``.
     motion_noise : float >= 0
         Scale of the actuation error: each wheel speed command ``q`` becomes
         ``q (1 + s e1) + s * ADDITIVE_WHEEL_NOISE * e2`` with standard normal ``e1, e2``
@@ -72,7 +75,10 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
     render_mode : "rgb_array" or None
         ``render()`` returns a top-down (north-up) map with the robot and the goal.
     city_size, block_size, street_width : float
-        City layout in metres (default 20 x 20 m, 4 m blocks, 2 m streets).
+        City layout in metres (default 20 x 20 m, 4 m blocks, 2 m streets). Bigger cities
+        keep the block size (a 60 m city has 9 x 9 blocks, 7.8 times the street area:
+        :meth:`envs.scene.City.street_area`), their floor and horizon textures the default
+        city's texel size (up to a 164 m city) and their skyline its density.
     frame_skip : int
         Physics steps (0.01 s each) per env step; ``dt = 0.01 * frame_skip`` (default 0.1 s).
     city_layout : {"random", "lookalike"}

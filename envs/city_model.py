@@ -9,10 +9,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["GROUND_PIXELS", "HORIZON_HEIGHT", "HORIZON_PIXELS", "CityModelMixin"]
+__all__ = ["GROUND_PIXELS", "HORIZON_HEIGHT", "HORIZON_PIXELS", "MAX_TEXTURE_SCALE",
+           "CityModelMixin"]
 
-GROUND_PIXELS = 1024  # floor texture side
-HORIZON_PIXELS = (512, 256)  # horizon wall texture (width, height)
+GROUND_PIXELS = 1024  # floor texture side of the default 20 m city (4.7 cm a texel)
+HORIZON_PIXELS = (512, 256)  # horizon wall texture (width, height) of the default city
+#: the floor half-side the texture sizes above are for (the default 20 m city's)
+_DEFAULT_FLOOR_HALF = 24.0
+#: bigger cities get textures 2, 4 (at most) times as wide, so a texel stays <= 4.7 cm up to a
+#: 164 m city (the 10 cm road markings and zebra stripes stay sharp); beyond, texels grow
+MAX_TEXTURE_SCALE = 4
 HORIZON_HEIGHT = 40.0  # m
 # horizon walls: distinct colours per side so heading is visible from far away
 _HORIZON = {"E": (0.85, 0.55, 0.35), "N": (0.45, 0.6, 0.85), "W": (0.55, 0.8, 0.55), "S": (0.8, 0.75, 0.5)}
@@ -92,6 +98,25 @@ class CityModelMixin:
         """Half side of the floor plane, whose texture :meth:`ground_image` paints."""
         return self.half + 14.0
 
+    def texture_scale(self) -> int:
+        """How many times the default city's texture widths this city's floor and horizon
+        textures have: the smallest power of two (at most :data:`MAX_TEXTURE_SCALE`) keeping
+        the default city's texel size, 1 for cities up to 20 m, 2 up to 68 m (a 60 m city's
+        1024-pixel floor would have 8.6 cm texels and blur the road markings)."""
+        ratio = self.floor_half() / _DEFAULT_FLOOR_HALF
+        scale = 1
+        while scale < ratio - 1e-9 and scale < MAX_TEXTURE_SCALE:
+            scale *= 2
+        return scale
+
+    def ground_pixels(self) -> int:
+        """Side (pixels) of the floor texture: :data:`GROUND_PIXELS` x :meth:`texture_scale`."""
+        return GROUND_PIXELS * self.texture_scale()
+
+    def horizon_pixels(self) -> tuple[int, int]:
+        """(width, height) of each horizon wall texture (the width scales like the floor's)."""
+        return HORIZON_PIXELS[0] * self.texture_scale(), HORIZON_PIXELS[1]
+
     def ground_image(self, pixels: int = 1024, extent: float | None = None) -> NDArray[np.uint8]:
         """Paint the ground seen from above, (pixels, pixels, 3) uint8, row 0 = north.
 
@@ -157,9 +182,9 @@ class CityModelMixin:
             a, h, w, c = model.tex_adr[tid], model.tex_height[tid], model.tex_width[tid], model.tex_nchannel[tid]
             model.tex_data[a : a + h * w * c] = image[:h, :w, :c].reshape(-1)
 
-        paint("ground", self.ground_image(GROUND_PIXELS))
+        paint("ground", self.ground_image(self.ground_pixels()))
         for side in "ENWS":  # MuJoCo maps the inner faces of the W and N walls mirrored
-            image = self.horizon_image(side, *HORIZON_PIXELS)
+            image = self.horizon_image(side, *self.horizon_pixels())
             paint(f"sky{side}", image[:, ::-1] if side in "WN" else image)
 
     def _obstacles_xml(self) -> tuple[list[str], list[str]]:
@@ -188,9 +213,10 @@ class CityModelMixin:
     def _scenery_xml(self, far: float) -> tuple[list[str], list[str]]:
         """Assets and visual-only geoms: floor and horizon walls (painted by :meth:`paint_textures`)."""
         f = far + 2.0
+        ground, (sky_w, sky_h) = self.ground_pixels(), self.horizon_pixels()
         assets = [
-            (f'<texture name="ground" type="2d" builtin="flat" width="{GROUND_PIXELS}" '
-             f'height="{GROUND_PIXELS}" rgb1="0.3 0.3 0.3"/>'),
+            (f'<texture name="ground" type="2d" builtin="flat" width="{ground}" '
+             f'height="{ground}" rgb1="0.3 0.3 0.3"/>'),
             '<material name="ground" texture="ground" texrepeat="1 1"/>',
         ]
         # a plane's third size is its rendering grid spacing: one big cell draws fastest
@@ -201,8 +227,8 @@ class CityModelMixin:
             "E": (far, 0, 0.5, far), "W": (-far, 0, 0.5, far), "N": (0, far, far, 0.5), "S": (0, -far, far, 0.5)
         }.items():
             assets.append(
-                f'<texture name="sky{name}" type="2d" builtin="flat" width="{HORIZON_PIXELS[0]}" '
-                f'height="{HORIZON_PIXELS[1]}" rgb1="{_fmt(_HORIZON[name])}"/>'
+                f'<texture name="sky{name}" type="2d" builtin="flat" width="{sky_w}" '
+                f'height="{sky_h}" rgb1="{_fmt(_HORIZON[name])}"/>'
             )
             assets.append(f'<material name="sky{name}" texture="sky{name}" texrepeat="1 1"/>')
             geoms.append(

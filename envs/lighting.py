@@ -27,7 +27,6 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from envs.city_model import GROUND_PIXELS
 from envs.conditions import Conditions
 
 __all__ = ["LAMP_HEIGHT", "Lighting", "lamp_ground_image", "lamp_positions", "lamps_xml",
@@ -55,8 +54,9 @@ def lamps_xml(city: Any) -> tuple[str, str]:
     heads exist, moved to the lamps nearest ahead of the camera before every image
     (:meth:`Lighting.place_heads`).
     """
-    assets = (f'<texture name="ground_lamps" type="2d" builtin="flat" width="{GROUND_PIXELS}" '
-              f'height="{GROUND_PIXELS}" rgb1="0.3 0.3 0.3"/>\n'
+    pixels = city.ground_pixels()
+    assets = (f'<texture name="ground_lamps" type="2d" builtin="flat" width="{pixels}" '
+              f'height="{pixels}" rgb1="0.3 0.3 0.3"/>\n'
               '<material name="ground_lamps" texture="ground_lamps" texrepeat="1 1"/>\n'
               '<material name="lamp_head" rgba="1 0.85 0.55 0" emission="1"/>')
     geoms = [f'<geom name="lamp_head{j}" type="box" size="0.12 0.12 0.06" '
@@ -114,7 +114,7 @@ class Lighting:
         self._lamps = lamp_positions(city)
         self.lamps_on = False
         if self._floor_mat[1] >= 0:
-            paint_texture(model, "ground_lamps", lamp_ground_image(city, GROUND_PIXELS))
+            paint_texture(model, "ground_lamps", lamp_ground_image(city, city.ground_pixels()))
         self._default = {"dir": model.light_dir[self._sun].copy(),
                          "rgba": model.mat_rgba.copy(), "emission": model.mat_emission.copy()}
         self._season: tuple[int, NDArray[np.float64]] | None = None

@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from envs.city_model import CityModelMixin
 from localization._validation import check_int, check_real, check_seed
 
-__all__ = ["Building", "City", "generate_city"]
+__all__ = ["Building", "City", "check_city_layout", "generate_city"]
 
 _LANDMARK_COLOURS = np.array(
     [[0.9, 0.1, 0.1], [0.1, 0.3, 0.95], [0.95, 0.85, 0.1], [0.1, 0.8, 0.2], [0.8, 0.1, 0.8]]
@@ -85,6 +85,13 @@ class City(CityModelMixin):
     def bounds(self) -> tuple[float, float]:
         """(low, high) of both coordinates."""
         return -self.half, self.half
+
+    def street_area(self) -> float:
+        """Area (m^2) of the streets: the city's square less the blocks between the streets
+        (256 m^2 in the default 20 m city, 2000 m^2 in a 60 m one)."""
+        c = self.street_centers
+        block = np.diff(c) - self.street_width
+        return float(self.size ** 2 - np.sum(block[:, None] * block[None, :]))
 
     def footprints(self) -> NDArray[np.float64]:
         """Return building footprints as (n, 4) rows ``[xmin, ymin, xmax, ymax]``."""
@@ -178,12 +185,27 @@ class City(CityModelMixin):
         return np.array([nodes[i * k + j] for i, j in order])
 
 
-def _street_centers(size: float, block_size: float, street_width: float) -> NDArray[np.float64]:
-    n_blocks = int(np.floor((size - street_width) / (block_size + street_width) + 1e-9))
+def check_city_layout(city_size: float, block_size: float = 4.0, street_width: float = 2.0) -> int:
+    """The number of blocks along a side of the city these sizes (m) give.
+
+    Raises
+    ------
+    TypeError, ValueError
+        If a size is not a positive finite number, or the city is too small for one block
+        between two streets.
+    """
+    for name, v in (("city_size", city_size), ("block_size", block_size),
+                    ("street_width", street_width)):
+        check_real(v, name, low=0.0, low_open=True)
+    n_blocks = int(np.floor((city_size - street_width) / (block_size + street_width) + 1e-9))
     if n_blocks < 1:
-        raise ValueError(
-            f"city_size={size} too small for one block of {block_size} m between streets of {street_width} m"
-        )
+        raise ValueError(f"city_size={city_size} too small for one block of {block_size} m "
+                         f"between streets of {street_width} m")
+    return n_blocks
+
+
+def _street_centers(size: float, block_size: float, street_width: float) -> NDArray[np.float64]:
+    n_blocks = check_city_layout(size, block_size, street_width)
     block = (size - street_width * (n_blocks + 1)) / n_blocks  # stretch blocks to fill the city
     first = -0.5 * size + 0.5 * street_width
     return first + np.arange(n_blocks + 1) * (block + street_width)
@@ -268,9 +290,15 @@ def generate_city(
         buildings = [b for b in buildings if not _overlaps(b, c, r)]
         rgb = _LANDMARK_COLOURS[rank % len(_LANDMARK_COLOURS)]
         buildings.append(Building((c[0], c[1], 0.5 * height), (r, r, 0.5 * height), tuple(rgb), tuple(rgb * 0.4), True))
-    skyline = _skyline(rng, 0.5 * city_size)
+    skyline = _skyline(rng, 0.5 * city_size, _skyline_per_side(city_size))
     return City(size=float(city_size), street_width=float(street_width), street_centers=centers,
                 buildings=buildings, seed=int(seed), skyline=skyline)
+
+
+def _skyline_per_side(city_size: float) -> int:
+    """Towers per side of the skyline: 10 along the default 20 m city's 28 m of horizon side,
+    as dense on a bigger city's (24 on a 60 m city), never fewer than 10."""
+    return max(10, round(10 * (city_size + 8.0) / 28.0))
 
 
 def _skyline(rng: np.random.Generator, half: float, per_side: int = 10) -> list[Building]:

@@ -132,12 +132,17 @@ def check_numbers(args: Any, positive: Iterable[str] = (), non_negative: Iterabl
 
 def check_env(args: Any, prefix: str = "") -> None:
     """The env options a command has among ``scene_seed`` (>= 0), ``camera`` (registered),
-    ``image_size`` (> 0) and ``motion_noise`` (>= 0)."""
-    from localization.workflows.sim import CAMERAS
+    ``image_size`` (> 0), ``motion_noise`` (>= 0) and ``city_size`` (> 0, room for a block)."""
+    from localization.workflows.sim import CAMERAS, check_city_layout
 
     names = {f.name for f in dataclasses.fields(args)}
-    check_numbers(args, positive=sorted(names & {"image_size"}),
+    check_numbers(args, positive=sorted(names & {"image_size", "city_size"}),
                   non_negative=sorted(names & {"scene_seed", "motion_noise"}), prefix=prefix)
+    if "city_size" in names:
+        try:
+            check_city_layout(args.city_size)
+        except ValueError as err:
+            raise UsageError(prefix + "city_size", str(err)) from None
     if "camera" in names:
         check_choice(prefix + "camera", args.camera, sorted(CAMERAS))
 

@@ -21,7 +21,9 @@ markdown table (``make bench`` runs them all).
 - coverage: single-image and closed-loop localization anywhere on the street surface at any
   heading, GSE against KNR and retrieval (``<coverage-out-dir>/bench_coverage.json`` / ``.md``);
 - parallel: dataset collection on one process, on local worker processes and on Ray tasks,
-  side by side (``<parallel-out-dir>/bench_parallel.json`` / ``.md``).
+  side by side (``<parallel-out-dir>/bench_parallel.json`` / ``.md``);
+- city60: closed-loop tracking and the scripted agent on held-out 60 m cities (nine times the
+  default area; ``<city60-out-dir>/bench_city60.json`` / ``.md``).
 
 Each benchmark's own options are ``--<benchmark>-<option>`` (listed below); they are checked
 for every benchmark chosen by ``--only`` before the first one starts.
@@ -51,6 +53,7 @@ from localization.workflows.benchmarks import BENCHMARKS, benchmark
 from localization.workflows.benchmarks.agents import AgentsBenchConfig
 from localization.workflows.benchmarks.appearance import FEATURES as APPEARANCE_FEATURES
 from localization.workflows.benchmarks.appearance import TRAININGS, AppearanceBenchConfig
+from localization.workflows.benchmarks.city60 import City60BenchConfig
 from localization.workflows.benchmarks.coverage import CoverageBenchConfig
 from localization.workflows.benchmarks.env import EnvBenchConfig
 from localization.workflows.benchmarks.filter import FilterBenchConfig
@@ -59,7 +62,14 @@ from localization.workflows.benchmarks.gse import GSEBenchConfig
 from localization.workflows.benchmarks.noise_models import NoiseBenchConfig
 from localization.workflows.benchmarks.parallel import ParallelBenchConfig
 from localization.workflows.kidnap_eval import FILTERS
-from localization.workflows.sim import CAMERAS, CONDITION_NAMES, LANE_SETS, MODES, NORMALIZATIONS
+from localization.workflows.sim import (
+    CAMERAS,
+    CONDITION_NAMES,
+    LANE_SETS,
+    MODES,
+    NORMALIZATIONS,
+    check_city_layout,
+)
 from localization.workflows.training import VEC_ENVS
 
 __all__ = ["Args", "check", "run"]
@@ -89,6 +99,8 @@ class Args:
         "help": "collection on one process, local processes and Ray, side by side"})
     noise: NoiseBenchConfig = field(default_factory=NoiseBenchConfig, metadata={
         "help": "global against heteroscedastic measurement noise R under each condition"})
+    city60: City60BenchConfig = field(default_factory=City60BenchConfig, metadata={
+        "help": "tracking and the scripted agent on 60 m cities (nine times the default area)"})
 
 
 def _check_env_bench(c: EnvBenchConfig) -> None:
@@ -184,10 +196,25 @@ def _check_noise_bench(c: NoiseBenchConfig) -> None:
     check_output_dir("noise_out_dir", c.out_dir)
 
 
+def _check_city60_bench(c: City60BenchConfig) -> None:
+    check_int_list("city60_cities", c.cities, minimum=0)
+    check_numbers(c, positive=("city_size", "image_size", "density", "n_components", "n_drive",
+                               "n_drives", "drive_steps", "episodes"),
+                  non_negative=("motion_noise", "max_episode_steps", "seed"), prefix="city60_")
+    try:
+        check_city_layout(c.city_size)
+    except ValueError as err:
+        raise UsageError("city60_city_size", str(err)) from None
+    if c.n_drive < 200:  # the noise's correlation time needs 4 blocks of 50 steps
+        raise UsageError("city60_n_drive", f"must be >= 200, got {c.n_drive}")
+    check_output_dir("city60_out_dir", c.out_dir)
+
+
 CHECKS = {"env": _check_env_bench, "gse": _check_gse_bench, "filter": _check_filter_bench,
           "agents": _check_agents_bench, "global": _check_global_bench,
           "appearance": _check_appearance_bench, "coverage": _check_coverage_bench,
-          "parallel": _check_parallel_bench, "noise": _check_noise_bench}
+          "parallel": _check_parallel_bench, "noise": _check_noise_bench,
+          "city60": _check_city60_bench}
 
 
 def _config(args: Args, name: str) -> object:

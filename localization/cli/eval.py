@@ -55,8 +55,8 @@ def check(args: Args) -> None:
         check_choice("measurement", args.measurement, MEASUREMENTS)
     check_env(args)
     check_choice("start", args.start, STARTS)
-    check_numbers(args, positive=("max_episode_steps", "episodes"),
-                  non_negative=("seed", "rerun_episodes"))
+    check_numbers(args, positive=("episodes",),
+                  non_negative=("seed", "rerun_episodes", "max_episode_steps"))
     check_output_dir("out", args.out)
     check_rerun(args.rerun)
     check_parallel(args)

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from localization.cli._args import UsageError
+from localization.cli._args import UsageError, check_env
 from localization.cli._recorded import check_data_options, check_out, load_data
 from localization.features import FEATURE_NAMES
 from localization.recorded import MAX_DIFFERENCE
@@ -55,6 +55,8 @@ class Args:
     noise_folds: int = field(default=3, metadata={
         "help": "folds of the measurement-noise estimate on recorded data (0: none)"})
     scene_seed: int = field(default=0, metadata={"help": "simulated city: names the city"})
+    city_size: float = field(default=20.0, metadata={
+        "help": "simulated city: its side (m; 60: nine times the default area)"})
     camera: str = field(default="perspective", metadata={"help": "simulated city: camera"})
     image_size: int = field(default=64, metadata={
         "help": "simulated city: side of the square camera image"})
@@ -121,9 +123,10 @@ def fit_city(args: Args, out: Path) -> None:
         raise UsageError("n-train", f"must be >= 1, got {args.n_train}")
     if args.n_drive < MIN_DRIVE:  # the noise's correlation time needs 4 blocks of 50 steps
         raise UsageError("n-drive", f"must be >= {MIN_DRIVE}, got {args.n_drive}")
+    check_env(args)
     params = localizer_params(args)
-    env = gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, camera=args.camera,
-                   image_size=(args.image_size, args.image_size),
+    env = gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, city_size=args.city_size,
+                   camera=args.camera, image_size=(args.image_size, args.image_size),
                    motion_noise=args.motion_noise, max_episode_steps=None)
     try:
         with warnings.catch_warnings():  # GSE's eigen-gap warning on a thin tube of poses

@@ -42,10 +42,10 @@ def check(args: Args) -> None:
     check_env(args)
     check_choice("start", args.start, STARTS)
     check_choice("vec_env", args.vec_env, VEC_ENVS)
-    check_numbers(args, positive=("max_episode_steps", "total_timesteps", "n_envs", "n_steps",
+    check_numbers(args, positive=("total_timesteps", "n_envs", "n_steps",
                                   "batch_size", "eval_freq", "eval_episodes", "checkpoint_freq",
                                   "threads"),
-                  non_negative=("seed",))
+                  non_negative=("seed", "max_episode_steps"))
     check_output_dir("out", args.out)
 
 

@@ -48,6 +48,8 @@ class CollectConfig:
     n: int = field(default=1000, metadata={"help": "number of samples"})
     seed: int = field(default=0, metadata={"help": "seed of the poses / the route reset"})
     scene_seed: int = field(default=0, metadata={"help": "names the city"})
+    city_size: float = field(default=20.0, metadata={
+        "help": "side of the square city (m); the default 20 m city, 60 m: nine times its area"})
     camera: str = field(default="perspective", metadata={
         "help": "a registered camera: " + ", ".join(sorted(envs.CAMERAS))})
     height: int = field(default=64, metadata={"help": "image height (pixels)"})
@@ -86,9 +88,10 @@ _ENVS: dict[tuple, gym.Env] = {}  # this process's env per setting (workers reus
 
 def _env(c: CollectConfig) -> gym.Env:
     """The env of ``c``'s settings, made once per process."""
-    key = (c.scene_seed, c.camera, c.height, c.width, c.motion_noise, c.conditions)
+    key = (c.scene_seed, c.city_size, c.camera, c.height, c.width, c.motion_noise, c.conditions)
     if key not in _ENVS:
-        _ENVS[key] = gym.make("AppearanceNav-v0", scene_seed=c.scene_seed, camera=c.camera,
+        _ENVS[key] = gym.make("AppearanceNav-v0", scene_seed=c.scene_seed,
+                              city_size=c.city_size, camera=c.camera,
                               image_size=(c.height, c.width), motion_noise=c.motion_noise,
                               conditions=c.conditions)
     return _ENVS[key]
@@ -148,9 +151,9 @@ def collect_to_file(args: CollectConfig) -> Path:
     images, poses, info = collect_arrays(args)
     seconds = time.perf_counter() - t0
     settings = {k: v for k, v in dataclasses.asdict(args).items() if k not in RUN_OPTIONS}
-    path = envs.save_dataset(out, images, poses, **settings, dt=info["dt"],
-                             city_size=info["city_size"],
-                             chunk=CHUNK if args.mode != "route" else args.n)
+    settings.update(dt=info["dt"], city_size=info["city_size"],
+                    chunk=CHUNK if args.mode != "route" else args.n)
+    path = envs.save_dataset(out, images, poses, **settings)
     print(f"wrote {path}: images {images.shape}, poses {poses.shape} in {seconds:.1f} s "
           f"({args.n / seconds:.0f} samples/s, {args.workers} worker(s)"
           f"{' on Ray' if args.ray_address else ''})")

@@ -36,7 +36,7 @@ import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
 from agents.evaluation import Episode, as_records, run_episodes, summarize
 from agents.ppo import PPOAgent
 from agents.scripted import ScriptedAgent
-from agents.sources import POSE_SOURCES, make_pose_env
+from agents.sources import POSE_SOURCES, agent_episode_steps, make_pose_env
 from localization.localizer import AppearanceLocalizer
 from localization.workflows.agent_env import AgentEnvSettings, city_options
 from localization.workflows.parallel import RAY_ADDRESS_HELP, WORKERS_HELP, map_tasks
@@ -85,10 +85,10 @@ def agents_table(rows: list[dict]) -> str:
 def _make_env(args: EvalConfig, source: str, localizer: AppearanceLocalizer | None) -> Any:
     """The pose env of ``source`` (the settings of ``args``)."""
     return make_pose_env(source, localizer, measurement=args.measurement or None,
-                         scene_seed=args.scene_seed, camera=args.camera,
-                         image_size=(args.image_size, args.image_size),
+                         scene_seed=args.scene_seed, city_size=args.city_size,
+                         camera=args.camera, image_size=(args.image_size, args.image_size),
                          motion_noise=args.motion_noise,
-                         max_episode_steps=args.max_episode_steps, start=args.start,
+                         max_episode_steps=args.max_episode_steps or None, start=args.start,
                          **city_options(source, args.allow_other_city))
 
 
@@ -225,10 +225,11 @@ def evaluate_agents(args: EvalConfig) -> list[dict]:
         print("\n".join(agents_table(rows).splitlines()[2:]), flush=True)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    md = (f"# Navigation on the pose belief\n\nCity {args.scene_seed}, {args.camera} "
-          f"{args.image_size}x{args.image_size}, motion noise {args.motion_noise}, "
-          f"{args.episodes} episodes (reset seeds {args.seed}..), truncation at "
-          f"{args.max_episode_steps} steps.\n\n{agents_table(rows)}\n")
+    limit = args.max_episode_steps or agent_episode_steps(args.city_size)
+    md = (f"# Navigation on the pose belief\n\nCity {args.scene_seed} ({args.city_size:g} m), "
+          f"{args.camera} {args.image_size}x{args.image_size}, motion noise "
+          f"{args.motion_noise}, {args.episodes} episodes (reset seeds {args.seed}..), "
+          f"truncation at {limit} steps.\n\n{agents_table(rows)}\n")
     (out / "agents.md").write_text(md)
     settings = {k: v for k, v in dataclasses.asdict(args).items()
                 if k not in ("workers", "ray_address")}

@@ -12,9 +12,11 @@ import envs
 from envs.conditions import PRESETS
 from envs.datasets import MODES
 from envs.lanes import LANE_SETS
+from envs.scene import check_city_layout
 from localization.features.pixel_pca import NORMALIZATIONS
 
-__all__ = ["CAMERAS", "CONDITION_NAMES", "LANE_SETS", "MODES", "NORMALIZATIONS"]
+__all__ = ["CAMERAS", "CONDITION_NAMES", "LANE_SETS", "MODES", "NORMALIZATIONS",
+           "check_city_layout"]
 
 CAMERAS = envs.CAMERAS
 #: the names ``conditions=`` takes: the presets and "random"

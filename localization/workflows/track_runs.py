@@ -44,6 +44,8 @@ class TrackConfig:
     """Settings of the tracking runs (the options of ``appearance-nav track``)."""
 
     scene_seed: int = field(default=0, metadata={"help": "names the city"})
+    city_size: float = field(default=20.0, metadata={
+        "help": "side of the square city (m); the default 20 m city, 60 m: nine times its area"})
     camera: str = field(default="perspective", metadata={"help": "camera of the env"})
     image_size: int = field(default=64, metadata={"help": "side of the square camera image"})
     motion_noise: float = field(default=0.05, metadata={"help": "env actuation noise"})
@@ -69,8 +71,8 @@ class TrackConfig:
 
 def make_env(args: TrackConfig) -> gym.Env:
     """The env of the runs (no time limit)."""
-    return gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, camera=args.camera,
-                    image_size=(args.image_size, args.image_size),
+    return gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, city_size=args.city_size,
+                    camera=args.camera, image_size=(args.image_size, args.image_size),
                     motion_noise=args.motion_noise, max_episode_steps=None)
 
 

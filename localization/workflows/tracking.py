@@ -3,6 +3,7 @@
 Shared by the tracking runs (:mod:`.track_runs`), the demo (:mod:`.demo`), the filter
 benchmark (:mod:`.benchmarks.filter`) and the tests.
 
+- :func:`street_train_size`: a training-set size that grows with the city's street area.
 - :func:`fit_city_localizer`: the whole fit on one city: images around the driving lanes
   (``envs.collect_dataset(mode="lanes")``), :meth:`AppearanceLocalizer.fit`, a drive on the
   true pose for the process and measurement noise (:meth:`AppearanceLocalizer.fit_noise`)
@@ -29,6 +30,7 @@ benchmark (:mod:`.benchmarks.filter`) and the tests.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -49,6 +51,7 @@ from envs.datasets import (
 )
 from envs.lanes import street_tour
 from envs.off_lane import OffLanePilot
+from localization._validation import check_real
 from localization.geometry import Array, wrap_angle
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer, city_info
 from localization.workflows.quality import quality_report, warn_quality
@@ -164,6 +167,21 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
     seconds["quality"] = time.perf_counter() - t0
     warn_quality(loc.quality_)
     return loc, seconds
+
+
+def street_train_size(env: gym.Env, density: float) -> int:
+    """Training images for ``env``'s city at ``density`` images per square metre of street
+    (``city.street_area()``): ``ceil(density x area)``. A fixed n thins out as the city grows
+    (a 60 m city has 7.8 times the default city's 256 m^2 of streets); a density does not.
+    The 60 m benchmark's density was chosen on tuning city 53 (docs/benchmarks.md §10).
+
+    Raises
+    ------
+    ValueError
+        If ``density`` is not a positive finite number.
+    """
+    density = check_real(density, "density", low=0.0, low_open=True)
+    return max(1, math.ceil(density * env.unwrapped.city.street_area() - 1e-9))
 
 
 def distinct_views(localizer: AppearanceLocalizer, images: NDArray[np.uint8], poses: Array

@@ -104,10 +104,10 @@ def make_vec_env(args: TrainConfig, localizer: AppearanceLocalizer | None, n: in
     ``check_city=False`` skips the belief's city check (done once in this process instead)."""
     def make() -> NavigationObservation:
         env = make_pose_env(args.pose_source, localizer, measurement=args.measurement or None,
-                            scene_seed=args.scene_seed, camera=args.camera,
-                            image_size=(args.image_size, args.image_size),
+                            scene_seed=args.scene_seed, city_size=args.city_size,
+                            camera=args.camera, image_size=(args.image_size, args.image_size),
                             motion_noise=args.motion_noise,
-                            max_episode_steps=args.max_episode_steps, start=args.start,
+                            max_episode_steps=args.max_episode_steps or None, start=args.start,
                             **city_options(args.pose_source,
                                            args.allow_other_city or not check_city))
         return Monitor(NavigationObservation(StreetProgressReward(env)))

@@ -111,7 +111,7 @@ BAD = [
     ("eval --sources=", "--sources"),
     ("eval --localizer {missing}", "--localizer"),
     ("eval --sources oracle --episodes 0", "--episodes"),
-    ("eval --sources oracle --max-episode-steps 0", "--max-episode-steps"),
+    ("eval --sources oracle --max-episode-steps -1", "--max-episode-steps"),
     ("eval --sources oracle --start x", "--start"),
     ("eval --sources oracle --camera nope", "--camera"),
     # reproduce

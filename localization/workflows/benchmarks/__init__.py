@@ -13,7 +13,10 @@ in one run, each writing JSON and a markdown table.
 - :mod:`.coverage`: single-image and closed-loop localization anywhere on the street surface
   at any heading (coverage training, off-lane drives) against KNR and retrieval;
 - :mod:`.parallel`: dataset collection on one process, on local worker processes and on Ray
-  tasks, side by side.
+  tasks, side by side;
+- :mod:`.noise_models`: global against heteroscedastic measurement noise R;
+- :mod:`.city60`: closed-loop tracking and the scripted agent on 60 m cities (nine times
+  the default area).
 
 :data:`BENCHMARKS` maps each name to its module, settings class and run function; modules
 load on first use.
@@ -38,6 +41,7 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "coverage": ("coverage", "CoverageBenchConfig", "run_coverage_bench"),
     "parallel": ("parallel", "ParallelBenchConfig", "run_parallel_bench"),
     "noise": ("noise_models", "NoiseBenchConfig", "run_noise_bench"),
+    "city60": ("city60", "City60BenchConfig", "run_city60_bench"),
 }
 
 

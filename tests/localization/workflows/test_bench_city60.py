@@ -1,0 +1,87 @@
+"""The 60 m city benchmark: its options, its registration, a quick run; the training size
+that grows with the street area."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import gymnasium as gym
+import pytest
+
+import envs  # noqa: F401
+from localization.cli._args import UsageError
+from localization.cli.bench import Args, check
+from localization.workflows.benchmarks import BENCHMARKS, benchmark
+from localization.workflows.benchmarks.city60 import City60BenchConfig, run_city60_bench
+from localization.workflows.tracking import street_train_size
+
+
+@pytest.mark.parametrize("field, value, option", [
+    ("cities", "51,x", "--city60-cities"),
+    ("density", 0.0, "--city60-density"),
+    ("city_size", 5.0, "--city60-city-size"),
+    ("n_drive", 100, "--city60-n-drive"),
+    ("max_episode_steps", -1, "--city60-max-episode-steps"),
+])
+def test_bad_options_are_named(field, value, option):
+    args = Args(only="city60", city60=City60BenchConfig(**{field: value}))
+    with pytest.raises(UsageError, match=option):
+        check(args)
+
+
+def test_registered_for_bench_only_city60():
+    config, run = benchmark("city60")
+    assert "city60" in BENCHMARKS
+    assert config is City60BenchConfig and run is run_city60_bench
+    assert City60BenchConfig().cities == "51,52"  # the held-out cities; 53 tunes
+
+
+def test_training_size_grows_with_the_street_area():
+    sizes = {}
+    for size in (20.0, 60.0):
+        env = gym.make("AppearanceNav-v0", city_size=size)
+        sizes[size] = street_train_size(env, 24.0)
+        env.close()
+    assert sizes[20.0] == math.ceil(24.0 * 256)
+    assert sizes[60.0] == math.ceil(24.0 * 2000)
+    env = gym.make("AppearanceNav-v0")
+    with pytest.raises(ValueError, match="density"):
+        street_train_size(env, -1.0)
+    env.close()
+
+
+def test_quick_run_end_to_end(tmp_path: Path):
+    run_city60_bench(City60BenchConfig(quick=True, out_dir=str(tmp_path)))
+    saved = json.loads((tmp_path / "bench_city60.json").read_text())
+    table = (tmp_path / "bench_city60.md").read_text()
+    s = saved["summary"]["51"]
+    assert s["n_train"] == math.ceil(0.4 * 2000)
+    loop = s["closed_loop"]
+    assert loop["drives"] == 1 and loop["rmse"] >= 0 and loop["rmse_dead_reckoning"] >= 0
+    lo, hi = loop["nees_band"]
+    assert 0 < lo < 3 < hi
+    for source in ("belief", "oracle"):
+        agents = s["agents"][source]
+        assert agents["episodes"] == 1 and 0.0 <= agents["success_rate"] <= 1.0
+        assert len(saved["records"]["51"]["agents"][source]) == 1
+    assert saved["records"]["51"]["agents"]["belief"][0]["steps"] <= 40
+    assert "| 51 | 800 | 1 |" in table and "<= 0.20" in table
+    assert "60 m" in saved["setup"]
+
+
+def test_a_failed_fit_is_reported_and_the_run_goes_on(tmp_path: Path, monkeypatch):
+    from localization.workflows.benchmarks import city60
+
+    def refuse(args, env):
+        raise ValueError("the neighbourhood graph of 9 samples (k=3) has 2 connected components")
+
+    monkeypatch.setattr(city60, "fit_city", refuse)
+    result = run_city60_bench(City60BenchConfig(quick=True, out_dir=str(tmp_path)))
+    assert result["summary"] == {}
+    message = "the neighbourhood graph of 9 samples (k=3) has 2 connected components"
+    assert result["fit_failures"] == [f"city 51: {message}"]
+    saved = json.loads((tmp_path / "bench_city60.json").read_text())
+    assert saved["fit_failures"] == result["fit_failures"]
+    assert "Fit failed: city 51" in (tmp_path / "bench_city60.md").read_text()
