@@ -83,46 +83,46 @@ def test_bad_settings_are_named(name, value):
 
 # ---------------------------------------------------------------- a restart on trial
 START = 60  # the plain EKF accepts every image of the shared drive from here to step 200
+def _tracking_then_trial(localizer, drive, incumbent_error: float):
+    """A detecting EKF run on the shared drive up to START, then put on trial as a
+    divergence restart leaves it; the replaced EKF is ``incumbent_error`` m from where the
+    running one is (0: the running one is moved 3 m off instead). Returns the filter and
+    the statuses of the next 3 * TRIAL_STEPS steps."""
+    from localization.filtering.belief import TRIAL_STEPS, BeliefFilter
+    from tests.localization.conftest import make_env
+
+    images, poses, controls = drive
+    W = localizer.transform(images)
+    env = make_env()
+    f = BeliefFilter(localizer, env.unwrapped.motion_model, detect_divergence=True)
+    env.close()
+    f.reset(W[0], poses[0], P)
+    for t in range(1, START):
+        f.step(controls[t - 1], W[t])
+    if incumbent_error:
+        other = BeliefFilter(localizer, f.motion_model)
+        other.reset(W[START - 1], poses[START - 1] + np.array([incumbent_error, 0.0, 0.0]), P)
+        incumbent, misses = other.ekf, 20
+    else:
+        incumbent, misses = f.ekf, f.misses
+        f._start(f.x + np.array([3.0, 0.0, 0.0]), P)  # what a restart at aliased images does
+    f._trial = {"ekf": incumbent, "misses": misses, "steps": 0, "accepted": 0}
+    f.belief_status = "relocalizing"
+    end = START + 3 * TRIAL_STEPS
+    statuses = [f.step(controls[t - 1], W[t])[1] for t in range(START, end)]
+    return f, statuses, poses[end - 1]
+
+
 def test_a_restart_the_images_do_not_confirm_is_undone(localizer, drive):
     """A divergence restart at a wrong place (3 m off) with the replaced, right EKF on
     trial beside it: the next images are gated at the wrong place and accepted at the right
     one, so within TRIAL_STEPS measured steps the right EKF comes back ("reverted")."""
-    from localization.filtering.belief import TRIAL_STEPS, BeliefFilter
-    from tests.localization.conftest import make_env
-
-    images, poses, controls = drive
-    W = localizer.transform(images)
-    env = make_env()
-    f = BeliefFilter(localizer, env.unwrapped.motion_model, detect_divergence=True)
-    env.close()
-    f.reset(W[0], poses[0], P)
-    for t in range(1, START):
-        f.step(controls[t - 1], W[t])
-    right, misses = f.ekf, f.misses
-    f._start(f.x + np.array([3.0, 0.0, 0.0]), P)  # what a restart at aliased images does
-    f._trial = {"ekf": right, "misses": misses, "steps": 0, "accepted": 0}
-    f.belief_status = "relocalizing"
-    statuses = [f.step(controls[t - 1], W[t])[1] for t in range(START, START + 3 * TRIAL_STEPS)]
+    f, statuses, truth = _tracking_then_trial(localizer, drive, incumbent_error=0.0)
     assert "reverted" in statuses, statuses
-    assert np.hypot(*(f.x[:2] - poses[START + 3 * TRIAL_STEPS - 1, :2])) < 0.5
+    assert np.hypot(*(f.x[:2] - truth[:2])) < 0.5
 
 
 def test_a_restart_the_images_confirm_stands(localizer, drive):
-    from localization.filtering.belief import TRIAL_STEPS, BeliefFilter
-    from tests.localization.conftest import make_env
-
-    images, poses, controls = drive
-    W = localizer.transform(images)
-    env = make_env()
-    f = BeliefFilter(localizer, env.unwrapped.motion_model, detect_divergence=True)
-    env.close()
-    f.reset(W[0], poses[0], P)
-    for t in range(1, START):
-        f.step(controls[t - 1], W[t])
-    wrong = BeliefFilter(localizer, f.motion_model)
-    wrong.reset(W[START - 1], poses[START - 1] + np.array([3.0, 0.0, 0.0]), P)  # the replaced EKF: lost
-    f._trial = {"ekf": wrong.ekf, "misses": 20, "steps": 0, "accepted": 0}
-    f.belief_status = "relocalizing"
-    statuses = [f.step(controls[t - 1], W[t])[1] for t in range(START, START + 3 * TRIAL_STEPS)]
+    f, statuses, truth = _tracking_then_trial(localizer, drive, incumbent_error=3.0)
     assert "reverted" not in statuses and f._trial is None, statuses
-    assert np.hypot(*(f.x[:2] - poses[START + 3 * TRIAL_STEPS - 1, :2])) < 0.5
+    assert np.hypot(*(f.x[:2] - truth[:2])) < 0.5
