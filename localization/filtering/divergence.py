@@ -52,7 +52,7 @@ on wrong places often enough for restarts that the images did not confirm at onc
 0.93 against 0.97 without it, belief RMSE 0.57 m against 0.21 m). ``appearance-nav bench --only global`` (held-out cities
 21-24, docs/benchmarks.md §5) measures it beside the EKF without it and the particle belief:
 nominal RMSE 0.065 m as without it, 98 % of 120 kidnaps recovered within 30 steps (median 5),
-every lost step admitted, 93 % of the kidnapped scripted agent's goals (80 % without).
+every lost step admitted, 92 % of the kidnapped scripted agent's goals (80 % without).
 """
 
 from __future__ import annotations
