@@ -39,6 +39,7 @@ from localization.filtering._modes import Mode, find_modes
 from localization.filtering.augmented_mcl import LikelihoodAverages
 from localization.filtering.image_proposals import ImageProposals
 from localization.filtering.measurement_noise import inflate
+from localization.filtering.mode_confirmation import ModeConfirmation
 from localization.filtering.mode_tracker import make_tracker
 from localization.filtering.particle_likelihood import MEASUREMENTS, ParticleLikelihood
 from localization.filtering.particle_motion import (
@@ -46,7 +47,7 @@ from localization.filtering.particle_motion import (
     predict_particles,
     sample_body_noise,
 )
-from localization.filtering.resampling import seeded_resample
+from localization.filtering.resampling import resample_and_inject
 from localization.geometry import Array, wrap_angle
 
 __all__ = ["PARTICLE_STATUSES", "ParticleBelief"]
@@ -108,12 +109,8 @@ class ParticleBelief:
     lost_ratio, doubt_ratio, confident_weight : float
         Status thresholds (see ``PARTICLE_STATUSES``).
     confirm_share : float in [0, 1]; confirm_steps : int; unconfirm_steps : int or None
-        Particles seeded from images (a start without a pose, an injection) are a guess the
-        images can repeat in every place that looks alike: the dominant mode is confirmed
-        once at least ``confirm_share`` of the image's retrieved neighbours lie within
-        ``mode_radius`` of it on ``confirm_steps`` frames in a row (until then the status is
-        at best "ambiguous"), and loses it after ``unconfirm_steps`` frames in a row
-        without (None: never).
+        When the images confirm a dominant mode seeded from them (until then the status is
+        at best "ambiguous"): :class:`~localization.filtering.mode_confirmation.ModeConfirmation`.
     mode_radius, heading_scale : float
         Mode kernel (m) and metres per radian (:func:`~localization.filtering._modes.find_modes`).
     max_modes : int; min_mode_weight : float in (0, 1)
@@ -166,10 +163,7 @@ class ParticleBelief:
         self.lost_ratio = check_real(lost_ratio, "lost_ratio", **unit)
         self.doubt_ratio = check_real(doubt_ratio, "doubt_ratio", **unit)
         self.confident_weight = check_real(confident_weight, "confident_weight", **unit)
-        self.confirm_share = check_real(confirm_share, "confirm_share", **unit)
-        self.confirm_steps = check_int(confirm_steps, "confirm_steps", low=1)
-        self.unconfirm_steps = None if unconfirm_steps is None else \
-            check_int(unconfirm_steps, "unconfirm_steps", low=1)
+        self.confirmation = ModeConfirmation(confirm_share, confirm_steps, unconfirm_steps)
         self.resample, self.sample_free = resample, sample_free
         self.mode_radius, self.heading_scale = float(mode_radius), float(heading_scale)
         self.max_modes = check_int(max_modes, "max_modes", low=1)
@@ -201,12 +195,15 @@ class ParticleBelief:
         self.status = "initial"
         self.injected = 0
         self._recovering = False  # Augmented MCL injected this step
-        self.confirmed = False  # images agreed with the dominant mode since it was seeded
-        self._agreeing = 0  # frames in a row whose neighbours agree with the dominant mode
-        self._disagreeing = 0  # ... and in a row that do not
         self._fresh = np.zeros(0, dtype=bool)  # particles injected at the last step
 
     # ------------------------------------------------------------------ state
+    @property
+    def confirmed(self) -> bool:
+        """Have the images confirmed the dominant mode since particles were seeded from
+        them (:class:`~localization.filtering.mode_confirmation.ModeConfirmation`)?"""
+        return self.confirmation.confirmed
+
     @property
     def weights(self) -> Array:
         """Normalised weights (N,)."""
@@ -310,9 +307,8 @@ class ParticleBelief:
             self.tracker.reset(w, self.modes[0], known=x0 is not None)
         self.amcl.reset()
         self.status, self.injected, self._recovering = "initial", 0, False
-        self._agreeing = self._disagreeing = 0
-        self.confirmed = x0 is not None
-        self.confirmed = self._confirm(w)
+        self.confirmation.reset(x0 is not None)
+        self._confirm(w)
         self._fresh = np.zeros(self.n_particles, dtype=bool)
         return self.status
 
@@ -371,8 +367,8 @@ class ParticleBelief:
             self._fresh[:] = False
         self.injected, self._recovering = n_inject, n_amcl > 0
         if self._recovering:
-            self.confirmed, self._agreeing = False, 0
-        self.confirmed = self._confirm(w)
+            self.confirmation.withdraw()
+        self._confirm(w)
         self.status = self._status(w_avg)
         self._track(u, w)
         return w_avg, self.status
@@ -391,31 +387,20 @@ class ParticleBelief:
             self.status = "doubtful"
 
     def _resample(self, log_w: Array, n_inject: int, w: Array) -> None:
-        """Resample by ``self.resample`` (:func:`seeded_resample`) and replace ``n_inject``
-        random particles by proposals of the image."""
-        p = np.exp(log_w - logsumexp(log_w))
-        idx = seeded_resample(self.resample, p / p.sum(), self.rng)
-        X = self.particles[idx]
-        self._fresh = np.zeros(len(X), dtype=bool)
-        if n_inject > 0:
-            slots = self.rng.choice(len(X), size=n_inject, replace=False)
-            X[slots] = self._jitter(self.proposals(w), n_inject)
-            self._fresh[slots] = True
+        """Resample, replacing ``n_inject`` random particles by proposals of the image."""
+        X, self._fresh = resample_and_inject(
+            self.particles, log_w, self.resample, self.rng, n_inject,
+            lambda n: self._jitter(self.proposals(w), n))
         self._set(X)
 
-    def _confirm(self, w: Array) -> bool:
-        """Is the dominant mode confirmed after this frame? Unconfirmed: once the image's
-        retrieved neighbours agreed with it on ``confirm_steps`` frames in a row (this one
-        the last); confirmed: until they disagree on ``unconfirm_steps`` in a row."""
-        if self.confirmed and self.unconfirm_steps is None:
-            return True
-        ok = self._proposals.agreement(w, self.modes[0].mean, self.mode_radius,
-                                       self.heading_scale) >= self.confirm_share
-        self._agreeing, self._disagreeing = (self._agreeing + 1, 0) if ok else \
-            (0, self._disagreeing + 1)
-        if self.confirmed:
-            return self._disagreeing < self.unconfirm_steps
-        return self._agreeing >= self.confirm_steps
+    def _confirm(self, w: Array) -> None:
+        """Tell :attr:`confirmation` how far this image's retrieved neighbours agree with
+        the dominant mode (:mod:`localization.filtering.mode_confirmation`)."""
+        c = self.confirmation
+        if c.confirmed and c.unconfirm_steps is None:
+            return  # nothing can withdraw it: skip the retrieval
+        c.update(self._proposals.agreement(w, self.modes[0].mean, self.mode_radius,
+                                           self.heading_scale))
 
     def _status(self, w_avg: float) -> str:
         if self.amcl.w_fast < self.lost_ratio * self.amcl.w_slow:

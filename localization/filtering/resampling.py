@@ -12,10 +12,11 @@ from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.special import logsumexp
 
 from localization.geometry import Array
 
-__all__ = ["seeded_resample"]
+__all__ = ["resample_and_inject", "seeded_resample"]
 
 
 def seeded_resample(resample: Callable[[Array], ArrayLike], p: Array,
@@ -29,3 +30,20 @@ def seeded_resample(resample: Callable[[Array], ArrayLike], p: Array,
     finally:
         np.random.set_state(state)
     return np.minimum(idx, len(p) - 1)  # a cumulative sum a hair below 1
+
+
+def resample_and_inject(X: Array, log_w: Array, resample: Callable[[Array], ArrayLike],
+                        rng: np.random.Generator, n_inject: int = 0,
+                        draw: Callable[[int], Array] | None = None) -> tuple[Array, Array]:
+    """Resample particles ``X`` (N, d) by their log-weights ``log_w`` (N,) with the filterpy
+    scheme ``resample`` (:func:`seeded_resample`), then replace ``n_inject`` random ones by
+    ``draw(n_inject)`` (Augmented MCL's injections). Returns the particles (N, d) and which
+    of them were injected (N,) bool."""
+    p = np.exp(log_w - logsumexp(log_w))
+    X = np.asarray(X)[seeded_resample(resample, p / p.sum(), rng)]
+    fresh = np.zeros(len(X), dtype=bool)
+    if n_inject > 0 and draw is not None:
+        slots = rng.choice(len(X), size=n_inject, replace=False)
+        X[slots] = draw(n_inject)
+        fresh[slots] = True
+    return X, fresh

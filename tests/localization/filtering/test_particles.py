@@ -134,7 +134,7 @@ def test_image_seeded_modes_stay_ambiguous_until_an_image_agrees(localizer, feat
     pf.reset(W[k], x0=poses[k])
     assert pf.confirmed  # a given start pose needs no image to confirm it
     rng = np.random.default_rng(2)
-    pf.confirmed = False  # as after an injection
+    pf.confirmation.withdraw()  # as after an injection
     for centre, confirmed in ((poses[far], False), (poses[far], False), (poses[k], False),
                               (poses[k], True)):  # confirm_steps=2 agreeing frames in a row
         pf._set(centre + rng.normal(0.0, [0.05, 0.05, 0.01], (pf.n_particles, 3)))
@@ -153,12 +153,12 @@ def test_unconfirmed_modes_keep_drawing_from_the_images_proposals(localizer, fea
     k = 20  # its image's neighbours agree with poses[k] (see the test above)
     pf = _belief(localizer, max_injection=0.0, ambiguous_injection=0.2, track_mode=False)
     pf.reset(W[k], x0=poses[k])
-    pf.confirmed, pf._agreeing = False, 0  # as after an injection
+    pf.confirmation.withdraw()  # as after an injection
     rng = np.random.default_rng(3)
     pf._set(poses[k] + rng.normal(0.0, [0.05, 0.05, 0.01], (pf.n_particles, 3)))
     _, status = pf.step([0.0, 0.0], W[k])
     assert 0.1 * pf.n_particles < pf.injected < 0.3 * pf.n_particles
-    assert status == "ambiguous" and not pf.confirmed and pf._agreeing == 1
+    assert status == "ambiguous" and not pf.confirmed and pf.confirmation.agreeing == 1
     _, status = pf.step([0.0, 0.0], W[k])
     assert pf.confirmed and status == "tracking"
     pf.step([0.0, 0.0], W[k])
