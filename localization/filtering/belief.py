@@ -165,6 +165,7 @@ class BeliefFilter:
         self._confirm = 0
         self._forced = self._lost_now = self._doubtful_now = False
         self._trial: dict[str, Any] | None = None  # the EKF a restart replaced, on trial
+        self._z = np.zeros(0)  # the last step's measurement of the image
 
     @property
     def x(self) -> Array:
@@ -298,7 +299,7 @@ class BeliefFilter:
         image does not fit is refused; the belief is left alone)."""
         prior, kept, forced = self.ekf, (self.misses, self.gated), self._forced
         self._start(x0, P0)
-        z = self.localizer.measure(w, self.measurement)
+        z = self._z  # this step's measurement (_update)
         self._observe(w)
         try:
             ok = bool(np.all(np.isfinite(z))) and self.ekf.update(z, self.model).accepted
@@ -320,7 +321,7 @@ class BeliefFilter:
         assert trial is not None and self.ekf is not None
         old: PoseEKF = trial["ekf"]
         old.predict(self.gain * np.asarray(u, dtype=np.float64))
-        z = self.localizer.measure(w, self.measurement)
+        z = self._z  # this step's measurement (_update)
         try:
             took = bool(np.all(np.isfinite(z))) and old.update(z, self.model).accepted
         except OutOfDomainError:
@@ -366,7 +367,7 @@ class BeliefFilter:
 
     def _update(self, w: Array) -> tuple[float, str]:
         assert self.ekf is not None
-        z = self.localizer.measure(w, self.measurement)
+        z = self._z = self.localizer.measure(w, self.measurement)  # reused by the monitor
         if not np.all(np.isfinite(z)):
             return np.nan, "out_of_domain"
         self._observe(w)
