@@ -17,7 +17,7 @@ _LAZY = {
     "PPOAgent": "ppo", "make_ppo": "ppo", "save_policy": "ppo", "load_policy": "ppo",
     "POSE_SOURCES": "sources", "make_pose_env": "sources", "LaneStart": "sources",
     "Episode": "evaluation", "run_episode": "evaluation", "run_episodes": "evaluation",
-    "summarize": "evaluation",
+    "summarize": "evaluation", "spl": "evaluation",
 }
 __all__ = [
     "POSE_SOURCES",
@@ -40,6 +40,7 @@ __all__ = [
     "run_episode",
     "run_episodes",
     "save_policy",
+    "spl",
     "summarize",
 ]
 

@@ -1,4 +1,9 @@
-"""Run navigation episodes and measure them: success, path-length ratio, collisions, time.
+"""Run navigation episodes and measure them with the embodied-navigation field's metrics.
+
+Every summary reports, each with its standard error: success, SPL (success weighted by path
+length, Anderson et al. 2018, "On Evaluation of Embodied Navigation Agents", with the
+shortest street path as the reference), collisions per episode, time to goal and the belief's
+RMSE.
 
 Works with any agent that has ``reset()`` and ``act(obs)`` (or ``act(obs, info)``: it then
 gets the step's info, e.g. ``belief_status``) on belief observations and any env
@@ -19,7 +24,8 @@ from tqdm import tqdm
 
 from agents.planner import StreetPlanner, path_length
 
-__all__ = ["Episode", "run_episode", "run_episodes", "summarize"]
+__all__ = ["METRIC_COLUMNS", "Episode", "as_records", "mean_and_se", "metric_cells", "run_episode", "run_episodes", "spl",
+           "summarize"]
 
 
 @dataclass(frozen=True)
@@ -54,6 +60,55 @@ class Episode:
     def path_ratio(self) -> float:
         """Travelled / shortest street path length."""
         return self.path_length / max(self.shortest, 1e-9)
+
+    @property
+    def spl(self) -> float:
+        """This episode's term of SPL: ``success * shortest / max(path_length, shortest)``."""
+        return spl([self.success], [self.shortest], [self.path_length])
+
+
+def spl(success: Sequence[bool], shortest: Sequence[float], path_length: Sequence[float]
+        ) -> float:
+    """Success weighted by (normalised inverse) path length (Anderson et al. 2018)::
+
+        SPL = 1/N sum_i S_i * l_i / max(p_i, l_i)
+
+    Parameters
+    ----------
+    success : (N,) bool — S_i, the episode reached its goal.
+    shortest : (N,) float — l_i, the shortest path length (m) from the start to the goal.
+    path_length : (N,) float — p_i, the length (m) the agent travelled.
+
+    Returns
+    -------
+    float in [0, 1]. An episode whose start is already at the goal (l_i = 0) scores S_i.
+
+    Raises
+    ------
+    ValueError
+        If the three have different lengths, are empty, or hold negative or non-finite lengths.
+    """
+    s = np.asarray(success, dtype=bool)
+    lengths = [np.asarray(v, dtype=np.float64) for v in (shortest, path_length)]
+    if s.ndim != 1 or len(s) == 0 or any(v.shape != s.shape for v in lengths):
+        raise ValueError(f"success, shortest and path_length must be 1-D of one non-zero length, "
+                         f"got shapes {s.shape}, {lengths[0].shape}, {lengths[1].shape}")
+    for name, v in zip(("shortest", "path_length"), lengths):
+        if not np.all(np.isfinite(v)) or np.any(v < 0):
+            raise ValueError(f"{name} must hold finite lengths >= 0, got {v}")
+    l, p = lengths
+    ratio = np.divide(l, np.maximum(p, l), out=np.ones_like(l), where=np.maximum(p, l) > 0)
+    return float(np.mean(s * ratio))
+
+
+def mean_and_se(values: Sequence[float]) -> tuple[float, float]:
+    """The mean of ``values`` and its standard error ``std / sqrt(n)`` (NaN for an empty
+    sequence; 0 standard error for one value)."""
+    v = np.asarray(values, dtype=np.float64)
+    if len(v) == 0:
+        return float("nan"), float("nan")
+    se = float(np.std(v, ddof=1) / np.sqrt(len(v))) if len(v) > 1 else 0.0
+    return float(np.mean(v)), se
 
 
 def run_episode(env: gym.Env, agent: Any, seed: int, planner: StreetPlanner | None = None,
@@ -99,21 +154,55 @@ def run_episodes(env: gym.Env, agent: Any, seeds: Iterable[int], progress: bool 
 
 
 def summarize(episodes: Sequence[Episode]) -> dict[str, float]:
-    """Success rate, mean path ratio and time to goal (successes), collision rates, belief error."""
+    """The navigation metrics of ``episodes``, each ``<name>`` with its standard error
+    ``<name>_se``.
+
+    Returns
+    -------
+    dict with ``episodes``; ``success_rate`` (binomial standard error); ``spl`` (see
+    :func:`spl`); ``collisions_per_episode`` (steps in contact); ``collision_episodes``
+    (share of episodes with any contact); ``time_to_goal`` (simulated s) and ``path_ratio``
+    (travelled / shortest), over successes; ``belief_rmse`` (m, over every step of every
+    episode, its standard error by the delta method from the episodes' mean squared errors).
+    """
     if not episodes:
         raise ValueError("no episodes to summarize")
+    n = len(episodes)
     ok = [e for e in episodes if e.success]
-    return {
-        "episodes": len(episodes),
-        "success_rate": len(ok) / len(episodes),
-        "path_ratio": float(np.mean([e.path_ratio for e in ok])) if ok else float("nan"),
-        "time_to_goal": float(np.mean([e.time for e in ok])) if ok else float("nan"),
-        "collision_episodes": float(np.mean([e.collision_steps > 0 for e in episodes])),
-        "collisions_per_episode": float(np.mean([e.collision_steps for e in episodes])),
-        "belief_rmse": float(np.sqrt(np.nanmean([e.belief_rmse ** 2 for e in episodes]))),
-    }
+    p = len(ok) / n
+    out: dict[str, float] = {"episodes": n, "success_rate": p,
+                             "success_rate_se": float(np.sqrt(p * (1 - p) / n))}
+    for name, values in (("spl", [e.spl for e in episodes]),
+                         ("collisions_per_episode", [e.collision_steps for e in episodes]),
+                         ("collision_episodes", [e.collision_steps > 0 for e in episodes]),
+                         ("time_to_goal", [e.time for e in ok]),
+                         ("path_ratio", [e.path_ratio for e in ok])):
+        out[name], out[f"{name}_se"] = mean_and_se(values)
+    out["belief_rmse"], out["belief_rmse_se"] = _rmse_and_se([e.belief_rmse for e in episodes])
+    return out
+
+
+def _rmse_and_se(episode_rmse: Sequence[float]) -> tuple[float, float]:
+    """RMSE over the episodes (each weighted alike) from their RMSEs, with its delta-method
+    standard error ``se(mean e^2) / (2 RMSE)``."""
+    squares = np.asarray(episode_rmse, dtype=np.float64) ** 2
+    msq, se = mean_and_se(squares[np.isfinite(squares)])
+    rmse = float(np.sqrt(msq))
+    return rmse, (se / (2 * rmse) if rmse > 0 else 0.0)
 
 
 def as_records(episodes: Sequence[Episode]) -> list[dict[str, Any]]:
     """Episodes as JSON-ready dicts (with the path ratio)."""
     return [{**asdict(e), "path_ratio": e.path_ratio} for e in episodes]
+
+
+#: the table columns of :func:`metric_cells`: (summary key, header, decimals)
+METRIC_COLUMNS = (("success_rate", "success", 2), ("spl", "SPL", 2),
+                  ("collisions_per_episode", "collisions / episode", 2),
+                  ("time_to_goal", "time to goal (s)", 1), ("belief_rmse", "belief RMSE (m)", 2))
+
+
+def metric_cells(summary: dict[str, float]) -> list[str]:
+    """Markdown cells "value ± se" of a :func:`summarize` result, in :data:`METRIC_COLUMNS`
+    order."""
+    return [f"{summary[key]:.{d}f} ± {summary[key + '_se']:.{d}f}" for key, _, d in METRIC_COLUMNS]

@@ -9,9 +9,10 @@ motion model alone), the same ``episodes`` resets (start pose and goal, seeds
 ``appearance-nav train``) are run. Writes ``<out>/agents.md`` (table) and
 ``<out>/agents.json`` (summary and every episode).
 
-Columns: success rate (goal reached before truncation), path ratio (distance driven / shortest
-street path, over successes), collision episodes (share of episodes with any contact), time
-to goal (simulated seconds, over successes), belief RMSE (m, belief mean vs true position).
+Columns, each with its standard error (:func:`agents.evaluation.summarize`): success (goal
+reached before truncation), SPL (success weighted by path length, Anderson et al. 2018, the
+shortest street path as the reference), collisions per episode (steps in contact), time to goal
+(simulated seconds, over successes), belief RMSE (m, belief mean vs true position).
 
 With ``workers > 1`` or a ``ray_address`` the episodes of each agent and source are split by
 seed into tasks (:func:`~localization.workflows.parallel.map_tasks`); each worker builds its
@@ -33,7 +34,14 @@ from typing import Any
 import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
 
 # isort: split
-from agents.evaluation import Episode, as_records, run_episodes, summarize
+from agents.evaluation import (
+    METRIC_COLUMNS,
+    Episode,
+    as_records,
+    metric_cells,
+    run_episodes,
+    summarize,
+)
 from agents.ppo import PPOAgent
 from agents.scripted import ScriptedAgent
 from agents.sources import POSE_SOURCES, agent_episode_steps, make_pose_env
@@ -71,14 +79,13 @@ class EvalConfig(AgentEnvSettings):
 
 
 def agents_table(rows: list[dict]) -> str:
-    """The markdown table of the summaries."""
-    header = ("| agent | pose source | episodes | success rate | path ratio | collision episodes "
-              "| time to goal (s) | belief RMSE (m) |")
-    lines = [header, "|---|---|---:|---:|---:|---:|---:|---:|"]
+    """The markdown table of the summaries (each metric ± its standard error)."""
+    headers = [h for _, h, _ in METRIC_COLUMNS]
+    lines = ["| agent | pose source | episodes | " + " | ".join(headers) + " |",
+             "|---|---|---:|" + "---:|" * len(headers)]
     for r in rows:
-        lines.append(f"| {r['agent']} | {r['source']} | {r['episodes']} | {r['success_rate']:.2f} "
-                     f"| {r['path_ratio']:.2f} | {r['collision_episodes']:.2f} "
-                     f"| {r['time_to_goal']:.1f} | {r['belief_rmse']:.2f} |")
+        lines.append(f"| {r['agent']} | {r['source']} | {r['episodes']} | "
+                     + " | ".join(metric_cells(r)) + " |")
     return "\n".join(lines)
 
 
