@@ -204,5 +204,6 @@ METRIC_COLUMNS = (("success_rate", "success", 2), ("spl", "SPL", 2),
 
 def metric_cells(summary: dict[str, float]) -> list[str]:
     """Markdown cells "value ± se" of a :func:`summarize` result, in :data:`METRIC_COLUMNS`
-    order."""
-    return [f"{summary[key]:.{d}f} ± {summary[key + '_se']:.{d}f}" for key, _, d in METRIC_COLUMNS]
+    order ("n/a" where undefined: no time to goal without a success)."""
+    return ["n/a" if np.isnan(summary[key]) else f"{summary[key]:.{d}f} ± {summary[key + '_se']:.{d}f}"
+            for key, _, d in METRIC_COLUMNS]

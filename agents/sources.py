@@ -87,7 +87,8 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
                   image_size: tuple[int, int] = (64, 64), motion_noise: float = 0.1,
                   max_episode_steps: int | None = None, start: str = "lane",
                   kidnap_at: tuple[int, ...] = (), city_layout: str = "random",
-                  city_size: float = 20.0, **belief_kwargs: Any) -> gym.Env:
+                  city_size: float = 20.0, conditions: Any = None,
+                  **belief_kwargs: Any) -> gym.Env:
     """``AppearanceNav-v0`` with the named pose source (see the module docstring).
 
     Parameters
@@ -111,6 +112,9 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
         under the pose source, seeded by the reset seed: no pose source is told).
     city_layout : {"random", "lookalike"}
         The env's city layout.
+    conditions : str or dict, optional
+        The env's appearance conditions (a preset name such as "night" or "traffic",
+        "random", or a dict; see ``envs.conditions``); None: the env's default look.
     **belief_kwargs
         More BeliefWrapper settings (``filter``, ``filter_options``, ``gate_probability``,
         ``relocalize_after``, ...).
@@ -126,7 +130,8 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
     env = gym.make("AppearanceNav-v0", scene_seed=scene_seed, camera=camera,
                    image_size=check_image_size(image_size), motion_noise=motion_noise,
                    max_episode_steps=max_episode_steps, city_layout=city_layout,
-                   city_size=city_size)
+                   city_size=city_size,
+                   **({} if conditions is None else {"conditions": conditions}))
     if start == "lane":
         env = LaneStart(env)
     if kidnap_at:

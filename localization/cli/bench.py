@@ -23,7 +23,10 @@ markdown table (``make bench`` runs them all).
 - parallel: dataset collection on one process, on local worker processes and on Ray tasks,
   side by side (``<parallel-out-dir>/bench_parallel.json`` / ``.md``);
 - city60: closed-loop tracking and the scripted agent on held-out 60 m cities (nine times the
-  default area; ``<city60-out-dir>/bench_city60.json`` / ``.md``).
+  default area; ``<city60-out-dir>/bench_city60.json`` / ``.md``);
+- robustness: the scripted agent (and PPO with ``--robustness-policies``) on every pose source,
+  nominal, kidnapped, under each appearance preset and among moving vehicles, with success,
+  SPL, collisions, time to goal and belief RMSE (``<robustness-out-dir>/bench_robustness.*``).
 
 Each benchmark's own options are ``--<benchmark>-<option>`` (listed below); they are checked
 for every benchmark chosen by ``--only`` before the first one starts.
@@ -61,7 +64,11 @@ from localization.workflows.benchmarks.global_loc import GlobalBenchConfig
 from localization.workflows.benchmarks.gse import GSEBenchConfig
 from localization.workflows.benchmarks.noise_models import NoiseBenchConfig
 from localization.workflows.benchmarks.parallel import ParallelBenchConfig
+from localization.workflows.benchmarks.robustness import AGENTS as ROBUST_AGENTS
+from localization.workflows.benchmarks.robustness import SOURCES as ROBUST_SOURCES
+from localization.workflows.benchmarks.robustness import SPECIAL, RobustnessConfig
 from localization.workflows.kidnap_eval import FILTERS
+from localization.workflows.parallel import check_ray_address
 from localization.workflows.sim import (
     CAMERAS,
     CONDITION_NAMES,
@@ -101,6 +108,8 @@ class Args:
         "help": "global against heteroscedastic measurement noise R under each condition"})
     city60: City60BenchConfig = field(default_factory=City60BenchConfig, metadata={
         "help": "tracking and the scripted agent on 60 m cities (nine times the default area)"})
+    robustness: RobustnessConfig = field(default_factory=RobustnessConfig, metadata={
+        "help": "agents on every pose source: nominal, kidnapped, each preset, moving things"})
 
 
 def _check_env_bench(c: EnvBenchConfig) -> None:
@@ -210,11 +219,29 @@ def _check_city60_bench(c: City60BenchConfig) -> None:
     check_output_dir("city60_out_dir", c.out_dir)
 
 
+def _check_robustness_bench(c: RobustnessConfig) -> None:
+    check_int_list("robustness_cities", c.cities, minimum=0)
+    check_choices("robustness_conditions", c.conditions,
+                  [*SPECIAL, *(n for n in CONDITION_NAMES if n != "random")])
+    check_choices("robustness_sources", c.sources, ROBUST_SOURCES)
+    check_choices("robustness_agents", c.agents, ROBUST_AGENTS)
+    check_numbers(c, positive=("episodes", "image_size", "n_train", "n_drive", "max_steps",
+                               "kidnap_at", "workers"),
+                  non_negative=("seed", "motion_noise"), prefix="robustness_")
+    try:
+        check_ray_address(c.ray_address)
+    except (TypeError, ValueError) as err:
+        raise UsageError("robustness_ray_address", str(err)) from None
+    if c.policies and not Path(c.policies).is_dir():
+        raise UsageError("robustness_policies", f"no such folder: {c.policies}")
+    check_output_dir("robustness_out_dir", c.out_dir)
+
+
 CHECKS = {"env": _check_env_bench, "gse": _check_gse_bench, "filter": _check_filter_bench,
           "agents": _check_agents_bench, "global": _check_global_bench,
           "appearance": _check_appearance_bench, "coverage": _check_coverage_bench,
           "parallel": _check_parallel_bench, "noise": _check_noise_bench,
-          "city60": _check_city60_bench}
+          "city60": _check_city60_bench, "robustness": _check_robustness_bench}
 
 
 def _config(args: Args, name: str) -> object:

@@ -16,7 +16,9 @@ in one run, each writing JSON and a markdown table.
   tasks, side by side;
 - :mod:`.noise_models`: global against heteroscedastic measurement noise R;
 - :mod:`.city60`: closed-loop tracking and the scripted agent on 60 m cities (nine times
-  the default area).
+  the default area);
+- :mod:`.robustness`: the agents on every pose source, nominal, kidnapped, under each
+  appearance preset and among moving things, with the navigation field's metrics.
 
 :data:`BENCHMARKS` maps each name to its module, settings class and run function; modules
 load on first use.
@@ -42,6 +44,7 @@ BENCHMARKS: dict[str, tuple[str, str, str]] = {
     "parallel": ("parallel", "ParallelBenchConfig", "run_parallel_bench"),
     "noise": ("noise_models", "NoiseBenchConfig", "run_noise_bench"),
     "city60": ("city60", "City60BenchConfig", "run_city60_bench"),
+    "robustness": ("robustness", "RobustnessConfig", "run_robustness_bench"),
 }
 
 

@@ -1,0 +1,298 @@
+"""Robustness rows of the agents (issue 17): every agent on every pose source, nominal, with one
+kidnap per episode, under each appearance preset and with moving vehicles
+(``appearance-nav bench --only robustness``; its options are ``--robustness-<option>``).
+
+    appearance-nav bench --only robustness --robustness-workers 2
+    appearance-nav bench --only robustness --robustness-quick      # smoke run
+
+On each held-out city of ``cities`` (21, 22: never used to choose a default) two street-wide
+localizers are fitted (:func:`~localization.workflows.tracking.fit_city_localizer`,
+``lanes="streets"``, the localizer's default features): "daylight" on today's look and
+"randomised" on ``conditions="random"`` (every training image its own look). Then every
+(agent, pose source, condition) row runs ``episodes`` episodes per city from lane starts to
+random goals, the same reset seeds in every row:
+
+* conditions: ``nominal`` and ``kidnap`` (one unannounced kidnap at step ``kidnap_at``,
+  :class:`envs.kidnapping.KidnapWrapper`) on the daylight localizer; each appearance preset
+  of :data:`envs.conditions.PRESETS` (``traffic``: moving vehicles and pedestrians, a
+  collision hazard) on the randomised localizer;
+* pose sources: ``oracle`` (true pose), ``ekf`` and ``particles`` (the GSE belief with either
+  filter) and ``dead_reckoning``; the oracle and dead reckoning never see an image, so under
+  the lighting and camera presets their episodes would equal the nominal ones and are not
+  run again (the table says "as nominal"); with moving things they are;
+* agents: the scripted navigator (it slows down on a doubtful belief and stops to look
+  around while lost: :class:`agents.scripted.ScriptedAgent`) and, with ``policies``, PPO
+  (the policy trained on the true pose on the oracle, the one trained on the belief on the
+  other sources).
+
+The episodes are split into tasks by (city, condition, source, agent, seeds) and run by
+:func:`~localization.workflows.parallel.map_tasks` (``workers`` local processes or Ray); an
+episode depends only on its settings and reset seed, so the results equal the serial run's.
+Writes ``<out>/bench_robustness.json`` and ``.md`` (metrics of
+:func:`agents.evaluation.summarize`, each with its standard error).
+"""
+
+from __future__ import annotations
+
+import atexit
+import dataclasses
+import json
+import platform
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import envs  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
+
+# isort: split
+import gymnasium as gym
+
+from agents.evaluation import Episode, as_records, run_episodes, summarize
+from agents.scripted import ScriptedAgent
+from agents.sources import make_pose_env
+from envs.conditions import PRESETS
+from localization.localizer import AppearanceLocalizer
+from localization.workflows.benchmarks.robustness_report import markdown, targets
+from localization.workflows.parallel import RAY_ADDRESS_HELP, WORKERS_HELP, map_tasks
+from localization.workflows.tracking import fit_city_localizer
+
+__all__ = [
+    "AGENTS",
+    "FILTERS",
+    "SOURCES",
+    "RobustTask",
+    "RobustnessConfig",
+    "run_robust_task",
+    "run_robustness_bench",
+]
+
+#: the pose sources of the rows; "ekf" and "particles" are the belief with that filter
+SOURCES = ("oracle", "ekf", "particles", "dead_reckoning")
+FILTERS = {"ekf": "ekf", "particles": "particles"}
+AGENTS = ("scripted", "ppo")
+#: conditions that are not a preset of envs.conditions
+SPECIAL = ("nominal", "kidnap")
+#: presets with moving things (the image-free sources run them too: collisions)
+MOVING = tuple(name for name, c in PRESETS.items() if c.vehicles or c.pedestrians)
+DEFAULT_CONDITIONS = ",".join([*SPECIAL, *(p for p in PRESETS if p != "default")])
+
+
+@dataclass
+class RobustnessConfig:
+    """Settings of the robustness benchmark."""
+
+    cities: str = field(default="21,22", metadata={
+        "help": "comma-separated held-out scene seeds (never used to tune anything)"})
+    conditions: str = field(default=DEFAULT_CONDITIONS, metadata={
+        "help": "comma-separated: nominal, kidnap and appearance presets (envs.conditions)"})
+    sources: str = field(default=",".join(SOURCES), metadata={
+        "help": "comma-separated pose sources: " + ", ".join(SOURCES)})
+    agents: str = field(default="scripted,ppo", metadata={
+        "help": "comma-separated: scripted, ppo (ppo runs when --robustness-policies has them)"})
+    policies: str = field(default="", metadata={
+        "help": "folder with oracle/policy.pt and belief/policy.pt (appearance-nav train); "
+                "empty: no PPO rows"})
+    episodes: int = field(default=100, metadata={"help": "episodes per row and city"})
+    seed: int = field(default=3_000_000, metadata={"help": "first reset seed"})
+    kidnap_at: int = field(default=40, metadata={"help": "step of the kidnap ('kidnap' rows)"})
+    image_size: int = field(default=64, metadata={"help": "square image side (px)"})
+    motion_noise: float = field(default=0.1, metadata={"help": "env actuation noise"})
+    n_train: int = field(default=10000, metadata={"help": "street training images per localizer"})
+    n_drive: int = field(default=1500, metadata={"help": "steps of each noise-calibration drive"})
+    max_steps: int = field(default=400, metadata={"help": "episode truncation (steps)"})
+    workers: int = field(default=1, metadata={"help": WORKERS_HELP})
+    ray_address: str = field(default="", metadata={"help": RAY_ADDRESS_HELP})
+    reuse_localizers: bool = field(default=False, metadata={
+        "help": "use the localizers an earlier run saved under <out-dir>/robustness/ (same "
+                "settings) instead of fitting them again"})
+    quick: bool = field(default=False, metadata={"help": "smoke run: one city, tiny fits"})
+    out_dir: str = field(default="results", metadata={
+        "help": "where bench_robustness.json/.md and the localizers go"})
+
+    def resolved(self) -> RobustnessConfig:
+        """The settings actually run (``quick``: one city, three conditions, small fits)."""
+        if not self.quick:
+            return self
+        return dataclasses.replace(
+            self, cities=self.cities.split(",")[0], conditions="nominal,kidnap,night",
+            episodes=2, image_size=32, n_train=600, n_drive=400, max_steps=60, kidnap_at=10)
+
+    def lists(self) -> dict[str, list[str]]:
+        """cities, conditions, sources and agents as checked lists of names."""
+        names = {k: [s.strip() for s in getattr(self, k).split(",") if s.strip()]
+                 for k in ("cities", "conditions", "sources", "agents")}
+        known = {"conditions": [*SPECIAL, *PRESETS], "sources": list(SOURCES),
+                 "agents": list(AGENTS)}
+        for key, allowed in known.items():
+            bad = [n for n in names[key] if n not in allowed]
+            if bad or not names[key]:
+                raise ValueError(f"robustness {key} must be a comma-separated list of {allowed}, "
+                                 f"got {getattr(self, key)!r}")
+        return names
+
+
+def training_of(condition: str) -> str:
+    """The localizer a condition runs on: "daylight" for nominal and kidnap, else
+    "randomised"."""
+    return "daylight" if condition in SPECIAL else "randomised"
+
+
+def runs_condition(source: str, condition: str) -> bool:
+    """Whether the (source, condition) row is run: sources without images skip the presets
+    that change only the images."""
+    image_free = source in ("oracle", "dead_reckoning")
+    return not image_free or condition in SPECIAL or condition in MOVING
+
+
+def localizer_path(args: RobustnessConfig, city: int, training: str) -> Path:
+    return Path(args.out_dir) / "robustness" / f"localizer_{city}_{training}.npz"
+
+
+@dataclass(frozen=True)
+class FitTask:
+    """One localizer to fit and save."""
+
+    config: RobustnessConfig
+    city: int
+    training: str
+
+
+def run_fit_task(task: FitTask) -> float:
+    """Fit the task's street-wide localizer, save it; return the seconds taken."""
+    args, t0 = task.config, time.perf_counter()
+    env = gym.make("AppearanceNav-v0", scene_seed=task.city,
+                   conditions="default" if task.training == "daylight" else "random",
+                   image_size=(args.image_size, args.image_size), motion_noise=args.motion_noise,
+                   max_episode_steps=None)
+    with warnings.catch_warnings():  # GSE's eigen-gap warning on thin tubes of poses
+        warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
+        warnings.filterwarnings("ignore", message=".*quality.*")
+        loc, _ = fit_city_localizer(env, n_train=args.n_train, lanes="streets",
+                                    n_drive=args.n_drive, seed=task.city,
+                                    calibrate_on_belief=False, measurements=("representation",),
+                                    quality_steps=0)
+    env.close()
+    path = localizer_path(args, task.city, task.training)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    loc.save(path)
+    return time.perf_counter() - t0
+
+
+@dataclass(frozen=True)
+class RobustTask:
+    """The episodes of one agent on one pose source under one condition in one city."""
+
+    config: RobustnessConfig
+    city: int
+    condition: str
+    source: str
+    agent: str
+    seeds: tuple[int, ...]
+
+
+_ENVS: dict[tuple, gym.Env] = {}  # this worker's env per (settings, city, condition, source)
+_LOCALIZERS: dict[Path, AppearanceLocalizer] = {}
+
+
+@atexit.register
+def close_envs() -> None:
+    """Close the envs this process made for :func:`run_robust_task`."""
+    while _ENVS:
+        _ENVS.popitem()[1].close()
+
+
+def _localizer(args: RobustnessConfig, city: int, condition: str) -> AppearanceLocalizer:
+    path = localizer_path(args, city, training_of(condition))
+    if path not in _LOCALIZERS:
+        _LOCALIZERS[path] = AppearanceLocalizer.load(path)
+    return _LOCALIZERS[path]
+
+
+def make_env(args: RobustnessConfig, city: int, condition: str, source: str) -> gym.Env:
+    """The pose env of one row: ``source`` under ``condition`` in ``city``."""
+    loc = None if source == "oracle" else _localizer(args, city, condition)
+    kwargs: dict[str, Any] = {"filter": FILTERS[source]} if source in FILTERS else {}
+    return make_pose_env("belief" if source in FILTERS else source, loc, scene_seed=city,
+                         image_size=(args.image_size, args.image_size),
+                         motion_noise=args.motion_noise, max_episode_steps=args.max_steps,
+                         kidnap_at=(args.kidnap_at,) if condition == "kidnap" else (),
+                         conditions=None if condition in SPECIAL else condition, **kwargs)
+
+
+def make_agent(args: RobustnessConfig, agent: str, source: str, city: Any) -> Any:
+    """The scripted navigator, or the PPO policy trained on the row's kind of pose."""
+    if agent == "scripted":
+        return ScriptedAgent(city)
+    from agents.ppo import PPOAgent
+
+    return PPOAgent.load(policy_path(args, source), city)
+
+
+def policy_path(args: RobustnessConfig, source: str) -> Path:
+    return Path(args.policies) / ("oracle" if source == "oracle" else "belief") / "policy.pt"
+
+
+def run_robust_task(task: RobustTask) -> list[Episode]:
+    """Run the task's episodes (its env made once per process)."""
+    args = task.config
+    key = (dataclasses.astuple(dataclasses.replace(args, workers=1, ray_address="")),
+           task.city, task.condition, task.source)
+    if key not in _ENVS:
+        _ENVS[key] = make_env(args, task.city, task.condition, task.source)
+    env = _ENVS[key]
+    agent = make_agent(args, task.agent, task.source, env.unwrapped.city)
+    return run_episodes(env, agent, task.seeds, progress=False)
+
+
+def _rows(args: RobustnessConfig, names: dict[str, list[str]]) -> list[tuple[str, str, str]]:
+    """The (agent, source, condition) rows to run (PPO only with both policies)."""
+    agents = [a for a in names["agents"] if a != "ppo" or (
+        args.policies and all(policy_path(args, s).exists() for s in ("oracle", "ekf")))]
+    if "ppo" in names["agents"] and "ppo" not in agents:
+        print(f"robustness: no PPO rows (no policies in {args.policies!r}: appearance-nav train)")
+    return [(a, s, c) for a in agents for c in names["conditions"] for s in names["sources"]
+            if runs_condition(s, c)]
+
+
+def _fit_all(args: RobustnessConfig, cities: list[int], conditions: list[str]) -> float:
+    trainings = sorted({training_of(c) for c in conditions})
+    fits = [FitTask(args, city, t) for city in cities for t in trainings
+            if not (args.reuse_localizers and localizer_path(args, city, t).exists())]
+    seconds = map_tasks(run_fit_task, fits, workers=args.workers, ray_address=args.ray_address,
+                        desc=f"localizers ({len(fits)})")
+    return float(sum(seconds))
+
+
+def run_robustness_bench(args: RobustnessConfig) -> dict[str, Any]:
+    """Fit the localizers, run every row, write ``bench_robustness.json`` / ``.md``; return
+    the result."""
+    args = args.resolved()
+    names = args.lists()
+    cities = [int(c) for c in names["cities"]]
+    t0 = time.perf_counter()
+    fit_seconds = _fit_all(args, cities, names["conditions"])
+    rows = _rows(args, names)
+    seeds = tuple(range(args.seed, args.seed + args.episodes))
+    chunk = max(1, -(-len(seeds) // 2))  # two tasks per row and city: both workers stay busy
+    tasks = [RobustTask(args, city, c, s, a, seeds[i:i + chunk]) for a, s, c in rows
+             for city in cities for i in range(0, len(seeds), chunk)]
+    results = map_tasks(run_robust_task, tasks, workers=args.workers,
+                        ray_address=args.ray_address, desc=f"episodes ({len(tasks)} tasks)")
+    episodes: dict[str, list[Episode]] = {"/".join(r): [] for r in rows}
+    for task, runs in zip(tasks, results):
+        episodes[f"{task.agent}/{task.source}/{task.condition}"] += runs
+    summary = {key: summarize(runs) for key, runs in episodes.items()}
+    result = {"args": dataclasses.asdict(args), "machine": platform.platform(),
+              "fit_seconds": round(fit_seconds, 1),
+              "seconds": round(time.perf_counter() - t0, 1), "summary": summary,
+              "targets": targets(summary),
+              "episodes": {k: as_records(v) for k, v in episodes.items()}}
+    out = Path(args.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "bench_robustness.json").write_text(json.dumps(result, indent=1))
+    md = markdown(result)
+    (out / "bench_robustness.md").write_text(md)
+    print(md)
+    return result

@@ -1,0 +1,110 @@
+"""Targets and markdown report of the robustness benchmark (:mod:`.robustness`)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from agents.evaluation import METRIC_COLUMNS, metric_cells
+from envs.conditions import PRESETS
+
+__all__ = ["TARGETS", "markdown", "targets"]
+
+#: issue 17's targets on these rows
+TARGETS = {"scripted_nominal": 0.98, "scripted_kidnap_particles": 0.90,
+           "scripted_preset": 0.90, "collision_margin": 0.02, "ppo_ratio": 0.97}
+BELIEFS = ("ekf", "particles")
+
+
+def _target(name: str, value: float, limit: str, ok: bool) -> dict[str, Any]:
+    return {"target": name, "value": round(value, 3), "limit": limit, "pass": bool(ok)}
+
+
+def targets(summary: dict[str, dict[str, float]]) -> list[dict[str, Any]]:
+    """The issue's targets that the run's rows can decide (rows not run are left out)."""
+    out = []
+
+    def success(key: str) -> float | None:
+        return summary[key]["success_rate"] if key in summary else None
+
+    if (v := success("scripted/ekf/nominal")) is not None:
+        out.append(_target("scripted on the EKF belief, nominal: success", v,
+                           f">= {TARGETS['scripted_nominal']}", v >= TARGETS["scripted_nominal"]))
+    if (v := success("scripted/particles/kidnap")) is not None:
+        out.append(_target("scripted on the particle belief, one kidnap: success", v,
+                           f">= {TARGETS['scripted_kidnap_particles']}",
+                           v >= TARGETS["scripted_kidnap_particles"]))
+    for preset in PRESETS:
+        if (v := success(f"scripted/ekf/{preset}")) is not None:
+            out.append(_target(f"scripted on the EKF belief, {preset} (randomised localizer): "
+                               "success", v, f">= {TARGETS['scripted_preset']}",
+                               v >= TARGETS["scripted_preset"]))
+    out += _collision_targets(summary)
+    truth, belief = summary.get("ppo/oracle/nominal"), summary.get("ppo/ekf/nominal")
+    if truth and belief:
+        ratio = belief["success_rate"] / max(truth["success_rate"], 1e-9)
+        out.append(_target("PPO success, EKF belief / true pose, nominal", ratio,
+                           f">= {TARGETS['ppo_ratio']}", ratio >= TARGETS["ppo_ratio"]))
+    return out
+
+
+def _collision_targets(summary: dict[str, dict[str, float]]) -> list[dict[str, Any]]:
+    """Collisions per episode on each belief <= the true pose's + the margin (per agent and
+    condition run on both)."""
+    out = []
+    for key, row in summary.items():
+        agent, source, condition = key.split("/")
+        truth = summary.get(f"{agent}/oracle/{condition}")
+        if source in BELIEFS and truth is not None:
+            limit = truth["collisions_per_episode"] + TARGETS["collision_margin"]
+            out.append(_target(f"{agent} on {source}, {condition}: collisions per episode",
+                               row["collisions_per_episode"], f"<= {limit:.3f} (true pose + "
+                               f"{TARGETS['collision_margin']})",
+                               row["collisions_per_episode"] <= limit))
+    return out
+
+
+def success_matrix(result: dict[str, Any]) -> str:
+    """Success ± standard error: a row per condition, a column per (agent, source)."""
+    summary, conditions = result["summary"], result["args"]["conditions"].split(",")
+    columns = list(dict.fromkeys(k.rsplit("/", 1)[0] for k in summary))
+    lines = ["| condition | " + " | ".join(c.replace("/", " on ") for c in columns) + " |",
+             "|---|" + "---:|" * len(columns)]
+    for condition in conditions:
+        cells = []
+        for column in columns:
+            row = summary.get(f"{column}/{condition}")
+            cells.append("as nominal" if row is None else
+                         f"{row['success_rate']:.2f} ± {row['success_rate_se']:.2f}")
+        lines.append(f"| {condition} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def metrics_table(result: dict[str, Any]) -> str:
+    """Every row with every metric of :func:`agents.evaluation.summarize`."""
+    headers = [h for _, h, _ in METRIC_COLUMNS]
+    lines = ["| agent | condition | pose source | episodes | " + " | ".join(headers) + " |",
+             "|---|---|---|---:|" + "---:|" * len(headers)]
+    for key, row in result["summary"].items():
+        agent, source, condition = key.split("/")
+        lines.append(f"| {agent} | {condition} | {source} | {row['episodes']} | "
+                     + " | ".join(metric_cells(row)) + " |")
+    return "\n".join(lines)
+
+
+def markdown(result: dict[str, Any]) -> str:
+    """The report: settings, the success matrix, every metric, the targets."""
+    a = result["args"]
+    head = (f"# Agents under nominal conditions, kidnapping, appearance presets and moving "
+            f"things\n\nCities {a['cities']} (held out), {a['image_size']}x{a['image_size']} "
+            f"perspective images, motion noise {a['motion_noise']}, {a['episodes']} episodes "
+            f"per row and city (reset seeds {a['seed']}..), truncation at {a['max_steps']} "
+            f"steps, kidnap at step {a['kidnap_at']}; street-wide localizers of {a['n_train']} "
+            f"images, daylight (nominal, kidnap) or randomised conditions (the presets); "
+            f"{result['seconds']:.0f} s ({result['fit_seconds']:.0f} s of fits).\n\n"
+            "\"as nominal\": the source never sees an image, so its episodes under a lighting "
+            "or camera preset are the nominal ones.\n\n")
+    rows = "\n".join(f"| {t['target']} | {t['value']} | {t['limit']} | "
+                     f"{'PASS' if t['pass'] else 'MISS'} |" for t in result["targets"])
+    return (head + "## Success\n\n" + success_matrix(result) + "\n\n## Every metric (± standard "
+            "error)\n\n" + metrics_table(result) + "\n\n## Targets\n\n| target | value | limit "
+            "| status |\n|---|---:|---|---|\n" + rows + "\n")

@@ -1,0 +1,62 @@
+"""The robustness benchmark: rows, targets, and parallel episodes equal to the serial run."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from localization.workflows.benchmarks.robustness import (
+    RobustnessConfig,
+    run_robustness_bench,
+    runs_condition,
+    training_of,
+)
+from localization.workflows.benchmarks.robustness_report import targets
+
+
+def test_image_free_sources_skip_lighting_presets_only() -> None:
+    assert runs_condition("ekf", "night") and runs_condition("particles", "fog")
+    assert not runs_condition("oracle", "night") and not runs_condition("dead_reckoning", "dusk")
+    assert runs_condition("oracle", "traffic") and runs_condition("dead_reckoning", "kidnap")
+    assert training_of("kidnap") == "daylight" and training_of("traffic") == "randomised"
+
+
+@pytest.mark.parametrize("key, value, match", [
+    ("conditions", "nominal,sunny", "conditions"),
+    ("sources", "ekf,gps", "sources"),
+    ("agents", "", "agents"),
+])
+def test_unknown_names_are_refused(key: str, value: str, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        RobustnessConfig(**{key: value}).lists()
+
+
+def test_targets_from_rows() -> None:
+    row = {"success_rate": 0.95, "collisions_per_episode": 0.03}
+    summary = {"scripted/oracle/nominal": {**row, "success_rate": 1.0, "collisions_per_episode":
+                                           0.0},
+               "scripted/ekf/nominal": row, "scripted/particles/kidnap": row,
+               "scripted/ekf/night": row}
+    got = {t["target"]: t["pass"] for t in targets(summary)}
+    assert got == {"scripted on the EKF belief, nominal: success": False,
+                   "scripted on the particle belief, one kidnap: success": True,
+                   "scripted on the EKF belief, night (randomised localizer): success": True,
+                   "scripted on ekf, nominal: collisions per episode": False}
+
+
+def test_parallel_episodes_equal_the_serial_run(tmp_path: Path) -> None:
+    args = RobustnessConfig(cities="21", conditions="nominal,kidnap,traffic",
+                            sources="oracle,ekf,dead_reckoning", agents="scripted", episodes=2,
+                            image_size=32, n_train=500, n_drive=400, max_steps=25, kidnap_at=5,
+                            out_dir=str(tmp_path))
+    serial = run_robustness_bench(args)
+    parallel = run_robustness_bench(RobustnessConfig(**{**vars(args), "workers": 2,
+                                                        "reuse_localizers": True}))
+    assert serial["episodes"] == parallel["episodes"]
+    assert set(serial["summary"]) == {f"scripted/{s}/{c}" for s in ("oracle", "ekf",
+                                      "dead_reckoning") for c in ("nominal", "kidnap", "traffic")}
+    assert all(r["episodes"] == 2 for r in serial["summary"].values())
+    assert json.loads((tmp_path / "bench_robustness.json").read_text())["targets"]
+    assert "| traffic |" in (tmp_path / "bench_robustness.md").read_text()
