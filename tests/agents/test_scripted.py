@@ -101,3 +101,25 @@ def test_body_frame_and_navigation_features():
     np.testing.assert_allclose(out["waypoints"], [0.25, 0, 0.5, 0, 1.0, 0], atol=1e-6)
     np.testing.assert_allclose(out["goal"], [0.3, 0.0], atol=1e-6)
     np.testing.assert_allclose(out["uncertainty"], [0.2, 0.3, 0.1], atol=1e-6)
+
+
+def test_agent_does_not_steer_on_a_lost_belief() -> None:
+    """ "lost": stop and turn in place to look; "doubtful" and the like: the same steering at
+    the slow factor; "tracking" (or no info): full speed."""
+    env = gym.make("AppearanceNav-v0", scene_seed=0)
+    agent = ScriptedAgent(env.unwrapped.city, look_rate=0.5, slow_factor=0.5)
+    obs, info = env.reset(seed=3)
+    env.close()
+    pose = info["pose"].copy()
+    agent.act(_belief(pose, obs["goal"]))  # plans; then face the carrot: no turn on the spot
+    carrot = agent.navigator.path.ahead(agent.lookahead)
+    pose[2] = np.arctan2(carrot[1] - pose[1], carrot[0] - pose[0])
+    belief = _belief(pose, obs["goal"])
+    tracking = agent.act(belief, {"belief_status": "tracking"})
+    assert np.array_equal(tracking, agent.act(belief))
+    assert tracking[0] > 0
+    lost = agent.act(belief, {"belief_status": "lost"})
+    assert lost[0] == 0.0 and lost[1] == pytest.approx(0.5)
+    for status in ("doubtful", "relocalizing", "ambiguous"):
+        slow = agent.act(belief, {"belief_status": status})
+        assert slow[0] == pytest.approx(0.5 * tracking[0]) and slow[1] == pytest.approx(tracking[1])
