@@ -87,7 +87,8 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
                   image_size: tuple[int, int] = (64, 64), motion_noise: float = 0.1,
                   max_episode_steps: int | None = None, start: str = "lane",
                   kidnap_at: tuple[int, ...] = (), city_layout: str = "random",
-                  city_size: float = 20.0, **belief_kwargs: Any) -> gym.Env:
+                  city_size: float = 20.0, conditions: object = None,
+                  **belief_kwargs: Any) -> gym.Env:
     """``AppearanceNav-v0`` with the named pose source (see the module docstring).
 
     Parameters
@@ -111,6 +112,9 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
         under the pose source, seeded by the reset seed: no pose source is told).
     city_layout : {"random", "lookalike"}
         The env's city layout.
+    conditions : None, str, dict or envs.conditions.Conditions
+        The look of the episodes (``gymnasium.make(..., conditions=...)``, :mod:`envs.conditions`:
+        e.g. "night"); None: the default look.
     **belief_kwargs
         More BeliefWrapper settings (``filter``, ``filter_options``, ``gate_probability``,
         ``relocalize_after``, ...).
@@ -126,7 +130,7 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
     env = gym.make("AppearanceNav-v0", scene_seed=scene_seed, camera=camera,
                    image_size=check_image_size(image_size), motion_noise=motion_noise,
                    max_episode_steps=max_episode_steps, city_layout=city_layout,
-                   city_size=city_size)
+                   city_size=city_size, conditions=conditions)
     if start == "lane":
         env = LaneStart(env)
     if kidnap_at:
