@@ -8,15 +8,19 @@ learn the geometry of headings:
   :class:`agents.scripted.Navigator`, the same plan the scripted agent follows) ``lookaheads``
   metres ahead of the believed progress, in units of 2 m;
 - ``goal`` (2,): the goal, in units of 10 m;
-- ``uncertainty`` (3,): the belief's standard deviations of x, y (m) and yaw (rad).
+- ``uncertainty`` (3,): the belief's standard deviations of x, y (m) and yaw (rad);
+- with ``status=True`` also ``status`` (len(BELIEF_STATUSES),): the belief's own verdict
+  (``info["belief_status"]``: tracking, ambiguous, doubtful, lost, relocalizing) one-hot; a
+  source without a status (the oracle, dead reckoning) counts as "tracking".
 
-Values are clipped to their Box. The true pose is never used.
+Values are clipped to their Box. The true pose is never used. Policies saved before the status
+existed have no ``status`` key (``status=False``, the default).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
@@ -24,9 +28,10 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 
 from agents.scripted import OBS_NAMES, Navigator, check_belief_observation
-from localization._validation import check_array
+from localization._validation import check_array, check_bool
+from localization.filtering.divergence import BELIEF_STATUSES
 
-__all__ = ["NavigationFeatures", "NavigationObservation"]
+__all__ = ["NavigationFeatures", "NavigationObservation", "status_one_hot"]
 
 _TRIU = np.triu_indices(3)
 _DIAG = [int(np.flatnonzero((_TRIU[0] == i) & (_TRIU[1] == i))[0]) for i in range(3)]
@@ -51,43 +56,69 @@ class NavigationFeatures:
     city : envs.scene.City — the map.
     lookaheads : tuple of float — distances (m) ahead along the plan of the waypoints.
     replan_distance : float — see :class:`agents.scripted.Navigator`.
+    status : bool — add the belief status one-hot (``status`` key).
     """
 
     def __init__(self, city: Any, lookaheads: tuple[float, ...] = (0.5, 1.0, 2.0),
-                 replan_distance: float = 1.0) -> None:
+                 replan_distance: float = 1.0, status: bool = False) -> None:
         d = check_array(lookaheads, "lookaheads", ndim=1, what="(distances in m)")
         if len(d) == 0 or np.any(d <= 0):
             raise ValueError(f"lookaheads must be positive distances, got {lookaheads}")
         self.lookaheads = tuple(float(v) for v in d)
+        self.status = check_bool(status, "status")
         self.navigator = Navigator(city, replan_distance)
-        self.observation_space = self.space(self.lookaheads)
+        self.observation_space = self.space(self.lookaheads, self.status)
 
     @staticmethod
-    def space(lookaheads: tuple[float, ...]) -> spaces.Dict:
-        """The observation space for these lookaheads."""
-        return spaces.Dict({
+    def space(lookaheads: tuple[float, ...], status: bool = False) -> spaces.Dict:
+        """The observation space for these lookaheads (and the status one-hot)."""
+        keys = {
             "waypoints": spaces.Box(-LIMIT, LIMIT, (2 * len(lookaheads),), np.float32),
             "goal": spaces.Box(-LIMIT, LIMIT, (2,), np.float32),
             "uncertainty": spaces.Box(0.0, STD_LIMIT, (3,), np.float32),
-        })
+        }
+        if status:
+            keys["status"] = spaces.Box(0.0, 1.0, (len(BELIEF_STATUSES),), np.float32)
+        return spaces.Dict(keys)
 
     def reset(self) -> None:
         """Forget the plan (call at episode starts)."""
         self.navigator.reset()
 
-    def __call__(self, obs: Mapping[str, Any]) -> dict[str, NDArray[np.float32]]:
-        """The policy observation for one belief observation."""
+    def __call__(self, obs: Mapping[str, Any], status: str | None = None,
+                 ) -> dict[str, NDArray[np.float32]]:
+        """The policy observation for one belief observation and the belief's status
+        (``info["belief_status"]``; None: "tracking"; used only with ``status=True``).
+
+        Raises
+        ------
+        ValueError
+            If ``status`` is not one of ``BELIEF_STATUSES``.
+        """
         mean, cov, goal = check_belief_observation(obs)
         path = self.navigator.update(mean, goal, OBS_NAMES)
         ahead = np.array([path.ahead(d) for d in self.lookaheads])
         std = np.sqrt(np.clip(cov[_DIAG], 0.0, None))
-        return {
+        features = {
             "waypoints": np.clip(to_body_frame(ahead, mean).ravel() / WAYPOINT_UNIT,
                                  -LIMIT, LIMIT).astype(np.float32),
             "goal": np.clip(to_body_frame(goal[None], mean)[0] / GOAL_UNIT,
                             -LIMIT, LIMIT).astype(np.float32),
             "uncertainty": np.clip(std, 0.0, STD_LIMIT).astype(np.float32),
         }
+        if self.status:
+            features["status"] = status_one_hot(status)
+        return features
+
+
+def status_one_hot(status: str | None) -> NDArray[np.float32]:
+    """``status`` (one of ``BELIEF_STATUSES``; None: "tracking") as a one-hot vector."""
+    status = "tracking" if status is None else status
+    if status not in BELIEF_STATUSES:
+        raise ValueError(f"status must be one of {BELIEF_STATUSES} or None, got {status!r}")
+    one_hot = np.zeros(len(BELIEF_STATUSES), np.float32)
+    one_hot[BELIEF_STATUSES.index(status)] = 1.0
+    return one_hot
 
 
 class NavigationObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
@@ -97,29 +128,41 @@ class NavigationObservation(gym.ObservationWrapper, gym.utils.RecordConstructorA
     ----------
     env : gymnasium.Env
         An env whose observations are pose beliefs (``localization.wrappers``).
-    lookaheads, replan_distance
-        See :class:`NavigationFeatures`. The map is ``env.unwrapped.city``.
+    lookaheads, replan_distance, status
+        See :class:`NavigationFeatures`. The map is ``env.unwrapped.city``; the status is read
+        from each reset's and step's ``info["belief_status"]`` (absent: "tracking").
     """
 
     def __init__(self, env: gym.Env, lookaheads: tuple[float, ...] = (0.5, 1.0, 2.0),
-                 replan_distance: float = 1.0) -> None:
+                 replan_distance: float = 1.0, status: bool = False) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, lookaheads=lookaheads,
-                                                 replan_distance=replan_distance)
+                                                 replan_distance=replan_distance, status=status)
         gym.ObservationWrapper.__init__(self, env)
+        self._status: str | None = None
         space = env.observation_space
         if not isinstance(space, spaces.Dict) or not {"pose_mean", "pose_cov", "goal"} <= set(
                 space.spaces):
             raise ValueError("NavigationObservation needs a belief observation space with keys "
                              f"pose_mean, pose_cov, goal; got {space}")
-        self.features = NavigationFeatures(env.unwrapped.city, lookaheads, replan_distance)
+        self.features = NavigationFeatures(env.unwrapped.city, lookaheads, replan_distance,
+                                           status)
         self.observation_space = self.features.observation_space
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None,
               ) -> tuple[dict[str, NDArray[np.float32]], dict[str, Any]]:
         """Reset the env and forget the plan."""
         self.features.reset()
-        return super().reset(seed=seed, options=options)
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._status = info.get("belief_status")
+        return self.observation(obs), info
+
+    def step(self, action: Any) -> tuple[dict[str, NDArray[np.float32]], SupportsFloat, bool,
+                                         bool, dict[str, Any]]:
+        """Step the env; the observation carries the step's belief status."""
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self._status = info.get("belief_status")
+        return self.observation(obs), reward, terminated, truncated, info
 
     def observation(self, observation: Mapping[str, Any]) -> dict[str, NDArray[np.float32]]:
-        """The policy observation for the belief observation."""
-        return self.features(observation)
+        """The policy observation for the belief observation (and the last status)."""
+        return self.features(observation, self._status)

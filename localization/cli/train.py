@@ -18,6 +18,7 @@ import localization.workflows.sim  # noqa: F401  (chooses MUJOCO_GL before mujoc
 # isort: split
 from agents.sources import POSE_SOURCES, STARTS
 from localization.cli._args import (
+    UsageError,
     check_choice,
     check_env,
     check_existing_file,
@@ -26,6 +27,7 @@ from localization.cli._args import (
 )
 from localization.localizer import MEASUREMENTS
 from localization.workflows.training import VEC_ENVS, TrainConfig, train_agent
+from localization.wrappers import FILTERS
 
 __all__ = ["Args", "check", "run"]
 
@@ -45,7 +47,14 @@ def check(args: Args) -> None:
     check_numbers(args, positive=("total_timesteps", "n_envs", "n_steps",
                                   "batch_size", "eval_freq", "eval_episodes", "checkpoint_freq",
                                   "threads"),
-                  non_negative=("seed", "max_episode_steps"))
+                  non_negative=("seed", "max_episode_steps", "uncertainty_penalty"))
+    check_choice("filter", args.filter, FILTERS)
+    try:
+        args.kidnap_steps()
+        args.source_options()
+    except ValueError as err:
+        option = "kidnap_at" if "kidnap_at" in str(err) else "filter"
+        raise UsageError(option, str(err)) from None
     check_output_dir("out", args.out)
 
 

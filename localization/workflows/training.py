@@ -63,6 +63,44 @@ class TrainConfig(AgentEnvSettings):
     threads: int = field(default=1, metadata={"help": "torch threads"})
     out: str = field(default="results/agents", metadata={"help": "output folder"})
     progress: bool = field(default=True, metadata={"help": "show a progress bar"})
+    status: bool = field(default=False, metadata={
+        "help": "the policy also sees the belief status (tracking, ambiguous, doubtful, lost, "
+                "relocalizing) one-hot"})
+    kidnap_at: str = field(default="", metadata={
+        "help": "comma-separated steps of each training episode that start with a kidnap "
+                "(empty: none)"})
+    conditions: str = field(default="", metadata={
+        "help": "look of the training episodes (envs.conditions: a preset such as 'night', or "
+                "'random'; empty: the default look)"})
+    filter: str = field(default="ekf", metadata={"help": "the belief's filter: ekf or particles"})
+    detect_divergence: bool = field(default=False, metadata={
+        "help": "EKF: notice when lost and restart where the images agree (method 13.1)"})
+    uncertainty_penalty: float = field(default=0.0, metadata={
+        "help": "active localization: reward weight of the belief's position entropy above "
+                "0.1 m (agents.rewards; 0: off)"})
+
+    def kidnap_steps(self) -> tuple[int, ...]:
+        """``kidnap_at`` as a tuple of step numbers."""
+        try:
+            steps = tuple(int(v) for v in self.kidnap_at.split(",") if v.strip())
+        except ValueError:
+            raise ValueError(f"kidnap_at must be comma-separated step numbers, got "
+                             f"{self.kidnap_at!r}") from None
+        if any(k < 0 for k in steps):
+            raise ValueError(f"kidnap_at steps must be >= 0, got {self.kidnap_at!r}")
+        return steps
+
+    def source_options(self) -> dict[str, object]:
+        """``make_pose_env`` keywords of the kidnaps, conditions and (belief only) filter."""
+        options: dict[str, object] = {"kidnap_at": self.kidnap_steps(),
+                                      "conditions": self.conditions or None}
+        if self.pose_source == "belief":
+            options["filter"] = self.filter
+            if self.detect_divergence:
+                options["filter_options"] = {"detect_divergence": True}
+        elif self.filter != "ekf" or self.detect_divergence:
+            raise ValueError("filter and detect_divergence apply to pose_source 'belief' only")
+        return options
 
 
 class ProgressBar(BaseCallback):
@@ -83,16 +121,18 @@ class ProgressBar(BaseCallback):
 
 
 class PolicyCheckpoint(BaseCallback):
-    """Save the policy (no pickle) every ``freq`` environment steps."""
+    """Save the policy (no pickle) every ``freq`` environment steps (``status``: its
+    observation has the belief status, see :func:`agents.ppo.save_policy`)."""
 
-    def __init__(self, folder: Path, freq: int) -> None:
+    def __init__(self, folder: Path, freq: int, status: bool = False) -> None:
         super().__init__()
-        self.folder, self.freq, self.last = folder, freq, 0
+        self.folder, self.freq, self.last, self.status = folder, freq, 0, status
 
     def _on_step(self) -> bool:
         if self.num_timesteps - self.last >= self.freq:
             self.last = self.num_timesteps
-            save_policy(self.model, self.folder / f"policy_{self.num_timesteps}")
+            save_policy(self.model, self.folder / f"policy_{self.num_timesteps}",
+                        status=self.status)
         return True
 
 
@@ -108,9 +148,11 @@ def make_vec_env(args: TrainConfig, localizer: AppearanceLocalizer | None, n: in
                             camera=args.camera, image_size=(args.image_size, args.image_size),
                             motion_noise=args.motion_noise,
                             max_episode_steps=args.max_episode_steps or None, start=args.start,
+                            **args.source_options(),
                             **city_options(args.pose_source,
                                            args.allow_other_city or not check_city))
-        return Monitor(NavigationObservation(StreetProgressReward(env)))
+        reward = StreetProgressReward(env, uncertainty_penalty=args.uncertainty_penalty)
+        return Monitor(NavigationObservation(reward, status=args.status))
     if kind not in VEC_ENVS:
         raise ValueError(f"unknown vec_env {kind!r}; choose one of {VEC_ENVS}")
     venv = SubprocVecEnv([make] * n, start_method="fork") if kind == "subproc" \
@@ -142,12 +184,14 @@ def train_agent(args: TrainConfig) -> dict:
                               eval_freq=max(args.eval_freq // args.n_envs, 1),
                               log_path=str(out), deterministic=True, verbose=0)
     callbacks = CallbackList([ProgressBar(args.total_timesteps, args.progress), evaluation,
-                              PolicyCheckpoint(out / "checkpoints", args.checkpoint_freq)])
+                              PolicyCheckpoint(out / "checkpoints", args.checkpoint_freq,
+                                               args.status)])
     t0 = time.perf_counter()
     model.learn(args.total_timesteps, callback=callbacks)
     seconds = time.perf_counter() - t0
-    policy = save_policy(model, out / "policy", pose_source=args.pose_source,
-                         scene_seed=args.scene_seed)
+    policy = save_policy(model, out / "policy", status=args.status,
+                         pose_source=args.pose_source, scene_seed=args.scene_seed,
+                         settings=dataclasses.asdict(args))
     successes = getattr(evaluation, "evaluations_successes", [])
     summary = {
         "args": dataclasses.asdict(args), "train_seconds": round(seconds, 1),
