@@ -225,7 +225,10 @@ def _check_robustness_bench(c: RobustnessConfig) -> None:
                   [*SPECIAL, *(n for n in CONDITION_NAMES if n != "random")])
     check_choices("robustness_sources", c.sources, ROBUST_SOURCES)
     check_choices("robustness_agents", c.agents, ROBUST_AGENTS)
-    check_numbers(c, positive=("episodes", "image_size", "n_train", "n_drive", "max_steps",
+    check_choice("robustness_randomised_features", c.randomised_features,
+                 ["small_cnn", "pixel_pca"])
+    check_numbers(c, positive=("episodes", "image_size", "n_train", "n_train_randomised",
+                               "n_drive", "max_steps",
                                "kidnap_at", "workers"),
                   non_negative=("seed", "motion_noise"), prefix="robustness_")
     try:

@@ -98,8 +98,9 @@ def markdown(result: dict[str, Any]) -> str:
             f"things\n\nCities {a['cities']} (held out), {a['image_size']}x{a['image_size']} "
             f"perspective images, motion noise {a['motion_noise']}, {a['episodes']} episodes "
             f"per row and city (reset seeds {a['seed']}..), truncation at {a['max_steps']} "
-            f"steps, kidnap at step {a['kidnap_at']}; street-wide localizers of {a['n_train']} "
-            f"images, daylight (nominal, kidnap) or randomised conditions (the presets); "
+            f"steps, kidnap at step {a['kidnap_at']}; street-wide localizers: daylight "
+            f"(PixelPCA, {a['n_train']} images) for nominal and kidnap, randomised conditions "
+            f"({a['randomised_features']}, {a['n_train_randomised']} images) for the presets; "
             f"{result['seconds']:.0f} s ({result['fit_seconds']:.0f} s of fits).\n\n"
             "\"as nominal\": the source never sees an image, so its episodes under a lighting "
             "or camera preset are the nominal ones.\n\n")
