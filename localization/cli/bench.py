@@ -139,7 +139,8 @@ def _check_agents_bench(c: AgentsBenchConfig) -> None:
     check_numbers(c, positive=("total_timesteps", "eval_freq", "n_envs", "episodes", "n_train",
                                "n_components", "n_drive", "active_episodes", "workers"),
                   non_negative=("seed", "train_city", "first_seed", "active_penalty",
-                                "kidnap_step", "motion_noise"), prefix="agents_")
+                                "kidnap_step", "motion_noise", "active_timesteps"),
+                  prefix="agents_")
     check_output_dir("agents_localizers", c.localizers)
     check_output_dir("agents_out", c.out)
 

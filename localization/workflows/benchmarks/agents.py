@@ -20,7 +20,8 @@ anywhere on the street surface (issue 17; ``appearance-nav bench --only agents``
 3. Evaluation on the held-out cities ``eval_cities`` (never used to choose anything), random
    starts, ``episodes`` per city with reset seeds ``first_seed ..`` (the same for every
    row): PPO on the true pose, PPO on the belief. With "active": plain and active policy on
-   the belief, ``active_episodes`` per city, once with a kidnap at step ``kidnap_step`` of
+   the belief (the same budget: with ``active_timesteps`` < ``total_timesteps`` both runs'
+   checkpoints at that step), ``active_episodes`` per city, once with a kidnap at step ``kidnap_step`` of
    every episode and once at night (``conditions="night"``): success, path length, belief
    RMSE.
 
@@ -97,6 +98,10 @@ class AgentsBenchConfig:
     active_penalty: float = field(default=0.0, metadata={
         "help": "> 0: also train with this belief-entropy reward weight and compare it with "
                 "the plain reward under kidnapping and at night"})
+    active_timesteps: int = field(default=0, metadata={
+        "help": "PPO steps of the active policy (0: total_timesteps); when fewer, the plain "
+                "comparison is the belief policy's checkpoint at that step (a multiple of "
+                "100000, the checkpoint interval)"})
     active_episodes: int = field(default=50, metadata={
         "help": "episodes per city and condition of the active-localization comparison"})
     kidnap_step: int = field(default=50, metadata={
@@ -144,9 +149,28 @@ def _train_configs(args: AgentsBenchConfig) -> dict[str, TrainConfig]:
     configs = {"oracle": TrainConfig(pose_source="oracle", out=str(out / "oracle"), **common),
                "belief": TrainConfig(out=str(out / "belief"), **belief)}
     if args.active_penalty > 0:
+        steps = args.active_timesteps or args.total_timesteps
         configs["active"] = TrainConfig(out=str(out / "active"),
-                                        uncertainty_penalty=args.active_penalty, **belief)
+                                        uncertainty_penalty=args.active_penalty,
+                                        **{**belief, "total_timesteps": steps})
     return configs
+
+
+def comparison_policies(args: AgentsBenchConfig, policies: dict[str, str]) -> dict[str, str]:
+    """The plain ("belief") and active policies of the comparison: the final ones, or, when
+    ``active_timesteps`` < ``total_timesteps``, both runs' checkpoints at ``active_timesteps``
+    (the same number of updates)."""
+    steps = args.active_timesteps or args.total_timesteps
+    if steps == args.total_timesteps:
+        return policies
+    chosen = {}
+    for name in ("belief", "active"):
+        checkpoint = Path(policies[name]).parent / "checkpoints" / f"policy_{steps}.pt"
+        if not checkpoint.is_file():
+            raise FileNotFoundError(f"no checkpoint {checkpoint} for active_timesteps={steps} "
+                                    "(checkpoints are every 100000 steps)")
+        chosen[name] = str(checkpoint)
+    return {**policies, **chosen}
 
 
 def train_policies(args: AgentsBenchConfig) -> dict[str, dict[str, Any]]:
@@ -166,6 +190,7 @@ def _rows(args: AgentsBenchConfig, policies: dict[str, str],
     rows = [("PPO, true pose", "oracle", {"agent": policies["oracle"]}, args.episodes),
             ("PPO, belief", "belief", {"agent": policies["belief"]}, args.episodes)]
     if "active" in policies:
+        policies = comparison_policies(args, policies)
         for condition, settings in (("kidnap", {"kidnap_at": (args.kidnap_step,)}),
                                     ("night", {"conditions": "night"})):
             for name in ("belief", "active"):
