@@ -37,6 +37,7 @@ import json
 import platform
 import time
 import warnings
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -200,10 +201,14 @@ def _rows(args: AgentsBenchConfig, policies: dict[str, str],
     return rows
 
 
-def evaluate(args: AgentsBenchConfig, policies: dict[str, str]) -> list[dict[str, Any]]:
-    """Every row on every held-out city (pooled and per city)."""
+def evaluate(args: AgentsBenchConfig, policies: dict[str, str],
+             only: Collection[str] | None = None) -> list[dict[str, Any]]:
+    """Every row (or the rows named in ``only``) on every held-out city (pooled and per
+    city)."""
     tasks, owners = [], []
     for name, source, settings, n in _rows(args, policies):
+        if only is not None and name not in only:
+            continue
         for city in args.cities():
             seeds = list(range(args.first_seed, args.first_seed + n))
             for i in range(0, n, TASK_SEEDS):
