@@ -46,7 +46,6 @@ from localization.cli._args import (
     check_choice,
     check_choices,
     check_env,
-    check_existing_file,
     check_int_list,
     check_numbers,
     check_output_dir,
@@ -142,15 +141,16 @@ def _check_filter_bench(c: FilterBenchConfig) -> None:
 
 
 def _check_agents_bench(c: AgentsBenchConfig) -> None:
-    try:
-        check_existing_file("agents_localizer", c.localizer)
-    except UsageError as err:
-        raise UsageError("agents_localizer", f"{str(err).split(': ', 1)[1]} (appearance-nav "
-                         "demo writes it)") from None
-    check_env(c, prefix="agents_")
+    check_int_list("agents_eval_cities", c.eval_cities, minimum=0)
+    if c.train_kidnap_at:
+        check_int_list("agents_train_kidnap_at", c.train_kidnap_at, minimum=0)
     check_choice("agents_vec_env", c.vec_env, VEC_ENVS)
-    check_numbers(c, positive=("total_timesteps", "eval_freq", "n_envs", "episodes"),
-                  non_negative=("seed",), prefix="agents_")
+    check_numbers(c, positive=("total_timesteps", "eval_freq", "n_envs", "episodes", "n_train",
+                               "n_components", "n_drive", "active_episodes", "workers"),
+                  non_negative=("seed", "train_city", "first_seed", "active_penalty",
+                                "kidnap_step", "motion_noise", "active_timesteps"),
+                  prefix="agents_")
+    check_output_dir("agents_localizers", c.localizers)
     check_output_dir("agents_out", c.out)
 
 

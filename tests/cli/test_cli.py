@@ -135,8 +135,10 @@ BAD = [
     ("bench --only gse --gse-out {file}/bench", "--gse-out"),
     ("bench --only filter --filter-runs 0", "--filter-runs"),
     ("bench --only filter --filter-motion-noise -1", "--filter-motion-noise"),
-    ("bench --only agents --agents-localizer {missing}", "--agents-localizer"),
-    ("bench --only agents --agents-localizer {file} --agents-vec-env x", "--agents-vec-env"),
+    ("bench --only agents --agents-eval-cities a", "--agents-eval-cities"),
+    ("bench --only agents --agents-localizers {file}", "--agents-localizers"),
+    ("bench --only agents --agents-vec-env x", "--agents-vec-env"),
+    ("bench --only agents --agents-active-penalty -1", "--agents-active-penalty"),
     ("bench --gse-worker-n 5", "--gse-worker-n"),
 ]
 
