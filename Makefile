@@ -33,10 +33,12 @@ demo: setup
 test: setup
 	$(RUN) -m pytest -n 2 -q
 
-# the agents benchmark fits its street-surface localizers itself (results/localizers_free)
+# the agents benchmark fits its street-surface localizers itself (results/localizers_free);
+# the robustness rows run its PPO policies (results/agents) beside the scripted agent
 bench: setup
 	$(NAV) bench --only env,gse,filter,global,appearance,coverage,parallel,noise,city60
 	$(NAV) bench --only agents
+	$(NAV) bench --only robustness --robustness-policies results/agents --robustness-workers 2
 
 reproduce: setup
 	$(NAV) reproduce
