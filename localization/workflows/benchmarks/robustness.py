@@ -114,8 +114,8 @@ class RobustnessConfig:
     workers: int = field(default=1, metadata={"help": WORKERS_HELP})
     ray_address: str = field(default="", metadata={"help": RAY_ADDRESS_HELP})
     reuse_localizers: bool = field(default=False, metadata={
-        "help": "use the localizers an earlier run saved under <out-dir>/robustness/ (same "
-                "settings) instead of fitting them again"})
+        "help": "resume: use the localizers and finished episodes an earlier run saved under "
+                "<out-dir>/robustness/ (same settings) instead of fitting and running them again"})
     quick: bool = field(default=False, metadata={"help": "smoke run: one city, tiny fits"})
     out_dir: str = field(default="results", metadata={
         "help": "where bench_robustness.json/.md and the localizers go"})
@@ -216,13 +216,14 @@ class RobustTask:
     seeds: tuple[int, ...]
 
 
-_ENVS: dict[tuple, gym.Env] = {}  # this worker's env per (settings, city, condition, source)
-_LOCALIZERS: dict[Path, AppearanceLocalizer] = {}
+_ENVS: dict[tuple, gym.Env] = {}  # this worker's current env (one: an env with its renderer,
+_LOCALIZERS: dict[Path, AppearanceLocalizer] = {}  # filter and movers holds ~100 MB; a worker
+# that kept every row's env ran out of memory), and the localizers of its current city
 
 
 @atexit.register
 def close_envs() -> None:
-    """Close the envs this process made for :func:`run_robust_task`."""
+    """Close the env this process made for :func:`run_robust_task`."""
     while _ENVS:
         _ENVS.popitem()[1].close()
 
@@ -230,6 +231,8 @@ def close_envs() -> None:
 def _localizer(args: RobustnessConfig, city: int, condition: str) -> AppearanceLocalizer:
     path = localizer_path(args, city, training_of(condition))
     if path not in _LOCALIZERS:
+        if len(_LOCALIZERS) >= 2:  # a city's daylight and randomised localizers
+            _LOCALIZERS.clear()
         _LOCALIZERS[path] = AppearanceLocalizer.load(path)
     return _LOCALIZERS[path]
 
@@ -259,15 +262,42 @@ def policy_path(args: RobustnessConfig, source: str) -> Path:
 
 
 def run_robust_task(task: RobustTask) -> list[Episode]:
-    """Run the task's episodes (its env made once per process)."""
+    """Run the task's episodes (the env kept while the next task shares it). The records are
+    also written to :func:`task_path`, so that a run that stops early resumes there."""
     args = task.config
     key = (dataclasses.astuple(dataclasses.replace(args, workers=1, ray_address="")),
            task.city, task.condition, task.source)
     if key not in _ENVS:
+        close_envs()
         _ENVS[key] = make_env(args, task.city, task.condition, task.source)
     env = _ENVS[key]
     agent = make_agent(args, task.agent, task.source, env.unwrapped.city)
-    return run_episodes(env, agent, task.seeds, progress=False)
+    runs = run_episodes(env, agent, task.seeds, progress=False)
+    path = task_path(task)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(as_records(runs)))
+    return runs
+
+
+def task_path(task: RobustTask) -> Path:
+    """Where a task's episode records go (``<out>/robustness/episodes/``)."""
+    name = (f"{task.agent}_{task.source}_{task.condition}_{task.city}_{task.seeds[0]}-"
+            f"{task.seeds[-1]}_{task.config.image_size}px_{task.config.max_steps}.json")
+    return Path(task.config.out_dir) / "robustness" / "episodes" / name
+
+
+def load_task(task: RobustTask) -> list[Episode] | None:
+    """A finished task's episodes from an earlier run with ``reuse_localizers`` (the same
+    localizers), or None."""
+    path = task_path(task)
+    if not (task.config.reuse_localizers and path.exists()):
+        return None
+    names = {f.name for f in dataclasses.fields(Episode)}
+    try:
+        return [Episode(**{k: v for k, v in r.items() if k in names})
+                for r in json.loads(path.read_text())]
+    except (ValueError, TypeError) as err:
+        raise ValueError(f"{path} is not a task's episode records ({err}); delete it") from None
 
 
 def _rows(args: RobustnessConfig, names: dict[str, list[str]]) -> list[tuple[str, str, str]]:
@@ -302,8 +332,12 @@ def run_robustness_bench(args: RobustnessConfig) -> dict[str, Any]:
     chunk = max(1, -(-len(seeds) // 2))  # two tasks per row and city: both workers stay busy
     tasks = [RobustTask(args, city, c, s, a, seeds[i:i + chunk]) for a, s, c in rows
              for city in cities for i in range(0, len(seeds), chunk)]
-    results = map_tasks(run_robust_task, tasks, workers=args.workers,
-                        ray_address=args.ray_address, desc=f"episodes ({len(tasks)} tasks)")
+    done = {i: runs for i, t in enumerate(tasks) if (runs := load_task(t)) is not None}
+    todo = [t for i, t in enumerate(tasks) if i not in done]
+    fresh = iter(map_tasks(run_robust_task, todo, workers=args.workers,
+                           ray_address=args.ray_address,
+                           desc=f"episodes ({len(todo)} tasks, {len(done)} done before)"))
+    results = [done[i] if i in done else next(fresh) for i in range(len(tasks))]
     episodes: dict[str, list[Episode]] = {"/".join(r): [] for r in rows}
     for task, runs in zip(tasks, results):
         episodes[f"{task.agent}/{task.source}/{task.condition}"] += runs

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -52,9 +53,14 @@ def test_parallel_episodes_equal_the_serial_run(tmp_path: Path) -> None:
                             image_size=32, n_train=500, n_drive=400, max_steps=25, kidnap_at=5,
                             out_dir=str(tmp_path))
     serial = run_robustness_bench(args)
+    episodes = tmp_path / "robustness" / "episodes"
+    assert len(list(episodes.glob("*.json"))) == 18  # every task's records, for a resume
+    shutil.rmtree(episodes)  # run them again, on 2 workers, with the same localizers
     parallel = run_robustness_bench(RobustnessConfig(**{**vars(args), "workers": 2,
                                                         "reuse_localizers": True}))
     assert serial["episodes"] == parallel["episodes"]
+    resumed = run_robustness_bench(RobustnessConfig(**{**vars(args), "reuse_localizers": True}))
+    assert resumed["episodes"] == serial["episodes"]
     assert set(serial["summary"]) == {f"scripted/{s}/{c}" for s in ("oracle", "ekf",
                                       "dead_reckoning") for c in ("nominal", "kidnap", "traffic")}
     assert all(r["episodes"] == 2 for r in serial["summary"].values())
