@@ -38,7 +38,8 @@ class Episode:
     success : bool — the robot reached the goal (the env terminated).
     steps : int — env steps taken.
     time : float — seconds of simulated time (steps x dt).
-    path_length : float — distance (m) the robot actually travelled.
+    path_length : float — distance (m) the robot actually drove (a kidnap's teleport, flagged
+        by ``info["kidnapped"]``, is not counted).
     shortest : float — length (m) of the shortest street path from the start to the goal, less
         the goal radius (the episode ends that close to the goal).
     collision_steps : int — steps in which the robot touched a building or the boundary.
@@ -129,7 +130,8 @@ def run_episode(env: gym.Env, agent: Any, seed: int, planner: StreetPlanner | No
         action = agent.act(obs, info) if reads_info else agent.act(obs)
         obs, _, terminated, truncated, info = env.step(action)
         pose = info["pose"]
-        travelled += float(np.hypot(*(pose[:2] - prev)))
+        if not info.get("kidnapped", False):  # a teleport is not driven
+            travelled += float(np.hypot(*(pose[:2] - prev)))
         prev = pose[:2]
         collisions += bool(info["collision"])
         sq_err.append(float(np.sum((np.asarray(obs["pose_mean"][:2], float) - pose[:2]) ** 2))
