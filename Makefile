@@ -34,11 +34,13 @@ test: setup
 	$(RUN) -m pytest -n 2 -q
 
 # the agents benchmark fits its street-surface localizers itself (results/localizers_free);
-# the robustness rows run its PPO policies (results/agents) beside the scripted agent
+# the robustness rows run its PPO policies (results/agents) beside the scripted agent,
+# 12 episodes per city and row (~45 min for the scripted rows; 100, the issue's 200 per row, ~6 h)
 bench: setup
 	$(NAV) bench --only env,gse,filter,global,appearance,coverage,parallel,noise,city60
 	$(NAV) bench --only agents
-	$(NAV) bench --only robustness --robustness-policies results/agents --robustness-workers 2
+	$(NAV) bench --only robustness --robustness-policies results/agents --robustness-workers 2 \
+		--robustness-episodes 12
 
 reproduce: setup
 	$(NAV) reproduce
