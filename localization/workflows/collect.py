@@ -16,7 +16,6 @@ motion noise or traffic) each slice restarts them from its own seed
 
 from __future__ import annotations
 
-import atexit
 import dataclasses
 import time
 from dataclasses import dataclass, field
@@ -29,7 +28,13 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from localization.workflows.parallel import RAY_ADDRESS_HELP, WORKERS_HELP, map_tasks
+from localization.workflows.parallel import (
+    RAY_ADDRESS_HELP,
+    WORKERS_HELP,
+    close_worker_env,
+    map_tasks,
+    worker_env,
+)
 
 __all__ = ["CHUNK", "CollectConfig", "CollectTask", "collect_arrays", "collect_out_path",
            "collect_slice", "collect_tasks", "collect_to_file"]
@@ -83,25 +88,12 @@ class CollectTask:
     stop: int
 
 
-_ENVS: dict[tuple, gym.Env] = {}  # this process's env per setting (workers reuse theirs)
-
-
 def _env(c: CollectConfig) -> gym.Env:
-    """The env of ``c``'s settings, made once per process."""
+    """The env of ``c``'s settings (kept while the next slice shares them)."""
     key = (c.scene_seed, c.city_size, c.camera, c.height, c.width, c.motion_noise, c.conditions)
-    if key not in _ENVS:
-        _ENVS[key] = gym.make("AppearanceNav-v0", scene_seed=c.scene_seed,
-                              city_size=c.city_size, camera=c.camera,
-                              image_size=(c.height, c.width), motion_noise=c.motion_noise,
-                              conditions=c.conditions)
-    return _ENVS[key]
-
-
-@atexit.register
-def close_envs() -> None:
-    """Close the envs this process made (their renderers)."""
-    while _ENVS:
-        _ENVS.popitem()[1].close()
+    return worker_env(key, lambda: gym.make(
+        "AppearanceNav-v0", scene_seed=c.scene_seed, city_size=c.city_size, camera=c.camera,
+        image_size=(c.height, c.width), motion_noise=c.motion_noise, conditions=c.conditions))
 
 
 def collect_slice(task: CollectTask,
@@ -139,7 +131,7 @@ def collect_arrays(args: CollectConfig, progress: bool = True,
                           ray_address=args.ray_address, progress=progress,
                           desc=f"collect {args.mode} ({len(tasks)} slices)")
     finally:
-        close_envs()  # the serial run's
+        close_worker_env()  # the serial run's
     info = {**parts[0][2], "cpu_seconds": sum(p[2]["cpu_seconds"] for p in parts)}
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]), info
 

@@ -22,7 +22,6 @@ serial run's (only ``wall_seconds`` differs: the summed seconds of the row's tas
 
 from __future__ import annotations
 
-import atexit
 import dataclasses
 import json
 import math
@@ -47,7 +46,7 @@ from agents.scripted import ScriptedAgent
 from agents.sources import POSE_SOURCES, agent_episode_steps, make_pose_env
 from localization.localizer import AppearanceLocalizer
 from localization.workflows.agent_env import AgentEnvSettings, city_options
-from localization.workflows.parallel import RAY_ADDRESS_HELP, WORKERS_HELP, map_tasks
+from localization.workflows.parallel import RAY_ADDRESS_HELP, WORKERS_HELP, map_tasks, worker_env
 from localization.workflows.rerun_log import RerunLog, RerunRecorder
 
 __all__ = ["AGENTS", "EvalConfig", "EvalTask", "agents_table", "evaluate_agents",
@@ -132,30 +131,24 @@ class EvalTask:
     seeds: tuple[int, ...]
 
 
-_ENVS: dict[tuple, Any] = {}  # this worker's pose env per (settings, source)
 _LOCALIZERS: dict[str, AppearanceLocalizer] = {}
 
 
-@atexit.register
-def close_envs() -> None:
-    """Close the pose envs this process made for :func:`run_eval_task`."""
-    while _ENVS:
-        _ENVS.popitem()[1].close()
+def _localizer(path: str) -> AppearanceLocalizer:
+    """This process's copy of the localizer file (loaded once)."""
+    if path not in _LOCALIZERS:
+        _LOCALIZERS[path] = AppearanceLocalizer.load(path)
+    return _LOCALIZERS[path]
 
 
 def run_eval_task(task: EvalTask) -> tuple[list[Episode], float]:
-    """Run ``task``'s episodes (its env made once per process); episodes and seconds taken."""
+    """Run ``task``'s episodes (:func:`~localization.workflows.parallel.worker_env`: the env
+    kept while the next task shares it); episodes and seconds taken."""
     args, t0 = task.config, time.perf_counter()
     key = (dataclasses.astuple(dataclasses.replace(args, workers=1, ray_address="")),
            task.source)
-    if key not in _ENVS:
-        localizer = None
-        if task.source != "oracle":
-            if args.localizer not in _LOCALIZERS:
-                _LOCALIZERS[args.localizer] = AppearanceLocalizer.load(args.localizer)
-            localizer = _LOCALIZERS[args.localizer]
-        _ENVS[key] = _make_env(args, task.source, localizer)
-    env = _ENVS[key]
+    env = worker_env(key, lambda: _make_env(
+        args, task.source, None if task.source == "oracle" else _localizer(args.localizer)))
     agent = _make_agent(args, task.agent, task.source, env.unwrapped.city)
     runs = run_episodes(env, agent, task.seeds, progress=False)
     return runs, time.perf_counter() - t0

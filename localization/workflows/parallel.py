@@ -19,12 +19,13 @@ on N cores, not N x N threads).
 
 from __future__ import annotations
 
+import atexit
 import concurrent.futures as cf
 import multiprocessing
 import os
 import socket
 import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Hashable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, TypeVar
 from urllib.parse import urlsplit
@@ -32,7 +33,8 @@ from urllib.parse import urlsplit
 from tqdm.auto import tqdm
 
 __all__ = ["DISTRIBUTED_EXTRA", "RAY_ADDRESS_HELP", "WORKERS_HELP", "check_ray_address",
-           "check_workers", "import_ray", "limit_threads", "map_tasks"]
+           "check_workers", "close_worker_env", "import_ray", "limit_threads", "map_tasks",
+           "worker_env"]
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -271,3 +273,28 @@ def _check_reachable(address: str) -> None:
         raise ConnectionError(f"ray_address {address!r}: no Ray cluster answers at "
                               f"{host_port[0]}:{host_port[1]} ({err}); start one with "
                               "`ray start --head` or check the address") from None
+
+
+_WORKER_ENV: dict[Hashable, Any] = {}
+
+
+def worker_env(key: Hashable, make: Callable[[], Any]) -> Any:
+    """This process's env for ``key``, made by ``make()`` when the key changes.
+
+    A task runner of :func:`map_tasks` calls it for the env its episodes need: consecutive
+    tasks with the same ``key`` (settings, city, condition, pose source) share one env, and a
+    new key closes the previous env first. One env per process: an env holds a renderer, a
+    filter and moving things (~100 MB), and a worker that kept every row's env of the
+    robustness benchmark was killed out of memory at 6 GB.
+    """
+    if key not in _WORKER_ENV:
+        close_worker_env()
+        _WORKER_ENV[key] = make()
+    return _WORKER_ENV[key]
+
+
+@atexit.register
+def close_worker_env() -> None:
+    """Close the env :func:`worker_env` keeps (also at exit)."""
+    while _WORKER_ENV:
+        _WORKER_ENV.popitem()[1].close()

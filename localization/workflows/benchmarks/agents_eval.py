@@ -2,7 +2,8 @@
 city under one condition, split by reset seed into tasks for
 :func:`~localization.workflows.parallel.map_tasks`.
 
-Each worker loads a city's localizer and builds its env once (cached per process); an episode
+Each worker loads a city's localizer once and keeps its env while the next task shares it
+(:func:`~localization.workflows.parallel.worker_env`); an episode
 depends only on its reset seed, so a split run gives the serial run's records. Every row of a
 comparison runs the same seeds, so the oracle and belief rows (and the plain and active
 rows) start from the same poses with the same goals.
@@ -10,7 +11,6 @@ rows) start from the same poses with the same goals.
 
 from __future__ import annotations
 
-import atexit
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +24,7 @@ from agents.ppo import PPOAgent
 from agents.scripted import ScriptedAgent
 from agents.sources import make_pose_env
 from localization.localizer import AppearanceLocalizer
+from localization.workflows.parallel import worker_env
 
 __all__ = ["EpisodeTask", "localizer_path", "run_episode_task", "summarize_row"]
 
@@ -67,21 +68,16 @@ class EpisodeTask:
                 self.detect_divergence, self.motion_noise, self.start)
 
 
-_ENVS: dict[tuple[Any, ...], Any] = {}
 _LOCALIZERS: dict[Path, AppearanceLocalizer] = {}
 
 
-@atexit.register
-def _close_envs() -> None:
-    while _ENVS:
-        _ENVS.popitem()[1].close()
-
-
 def _env(task: EpisodeTask) -> Any:
-    """This process's env for ``task`` (made once)."""
-    key = task.env_key()
-    if key in _ENVS:
-        return _ENVS[key]
+    """This process's env for ``task`` (:func:`~localization.workflows.parallel.worker_env`)."""
+    return worker_env(task.env_key(), lambda: _make_env(task))
+
+
+def _make_env(task: EpisodeTask) -> Any:
+    """The pose env of ``task``."""
     belief: dict[str, Any] = {}
     localizer = None
     if task.source == "belief":
@@ -91,11 +87,9 @@ def _env(task: EpisodeTask) -> Any:
         localizer = _LOCALIZERS[path]
         if task.detect_divergence:
             belief["filter_options"] = {"detect_divergence": True}
-    _ENVS[key] = make_pose_env(task.source, localizer, scene_seed=task.city,
-                               motion_noise=task.motion_noise, start=task.start,
-                               kidnap_at=task.kidnap_at, conditions=task.conditions or None,
-                               **belief)
-    return _ENVS[key]
+    return make_pose_env(task.source, localizer, scene_seed=task.city,
+                         motion_noise=task.motion_noise, start=task.start,
+                         kidnap_at=task.kidnap_at, conditions=task.conditions or None, **belief)
 
 
 def run_episode_task(task: EpisodeTask) -> tuple[list[Episode], float]:

@@ -14,11 +14,11 @@ from typing import Any
 
 from tqdm import tqdm
 
-from agents.evaluation import Episode, run_episodes, summarize
+from agents.evaluation import Episode, run_episodes
 from agents.scripted import ScriptedAgent
 from agents.sources import make_pose_env
 
-__all__ = ["belief_settings", "kidnapped_episodes", "summarize_agents"]
+__all__ = ["belief_settings", "kidnapped_episodes"]
 
 
 def belief_settings(name: str) -> dict[str, Any]:
@@ -45,9 +45,3 @@ def kidnapped_episodes(localizer: Any, city: int, names: list[str], episodes: in
         if bar is not None:
             bar.update()
     return out
-
-
-def summarize_agents(runs: list[Episode]) -> dict[str, float]:
-    """Success rate with its standard error, and the other navigation measures."""
-    s = summarize(runs)
-    return {**s, "success_se": s["success_rate_se"]}  # the key the global report reads

@@ -58,6 +58,7 @@ from scipy.stats import chi2
 from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
+from agents.evaluation import summarize
 from localization.geometry import wrap_angle
 from localization.workflows import kidnap_eval as ke
 from localization.workflows.benchmarks import global_agents as ga
@@ -337,7 +338,7 @@ def run_global_bench(args: GlobalBenchConfig) -> dict[str, Any]:
     g_steps = np.array([np.inf if k is None else k for k in glob], dtype=float)
     summary = {n: {"kidnap": summarize_kidnaps(kid[n]), "nominal": summarize_nominal(nom[n]),
                    "lookalike": summarize_kidnaps(look[n]),
-                   "agents": ga.summarize_agents(agent_runs[n]) if agent_runs[n] else None,
+                   "agents": summarize(agent_runs[n]) if agent_runs[n] else None,
                    "global": None if n != "particles" or not glob else
                    {"n": len(glob), "recovered_within_30": float(np.mean(g_steps <= WITHIN)),
                     "median_steps": float(np.median(g_steps))}} for n in names}

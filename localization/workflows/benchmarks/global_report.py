@@ -66,7 +66,7 @@ def markdown(result: dict[str, Any]) -> str:
         lambda f, n: f"{f['nominal']['ms_per_step']:.1f}" + _mark(f["nominal"]["ms_per_step"] <= 20))
     row("agents: scripted agent, one kidnap per episode: success", ">= 90 % (particles)",
         lambda f, n: "n/a" if f.get("agents") is None else
-        f"{_pct(f['agents']['success_rate'])} ± {_pct(f['agents']['success_se'])} of "
+        f"{_pct(f['agents']['success_rate'])} ± {_pct(f['agents']['success_rate_se'])} of "
         f"{f['agents']['episodes']}" + ("" if n != "particles" else
                                          _mark(f["agents"]["success_rate"] >= 0.9)))
     lines = [f"Global localization ({result['setup']}):", "",

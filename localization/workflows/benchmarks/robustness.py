@@ -36,7 +36,6 @@ Writes ``<out>/bench_robustness.json`` and ``.md`` (metrics of
 
 from __future__ import annotations
 
-import atexit
 import dataclasses
 import json
 import platform
@@ -57,7 +56,7 @@ from agents.sources import make_pose_env
 from envs.conditions import PRESETS
 from localization.localizer import AppearanceLocalizer
 from localization.workflows.benchmarks.robustness_report import markdown, targets
-from localization.workflows.parallel import RAY_ADDRESS_HELP, WORKERS_HELP, map_tasks
+from localization.workflows.parallel import RAY_ADDRESS_HELP, WORKERS_HELP, map_tasks, worker_env
 from localization.workflows.tracking import fit_city_localizer
 
 __all__ = [
@@ -216,16 +215,7 @@ class RobustTask:
     seeds: tuple[int, ...]
 
 
-_ENVS: dict[tuple, gym.Env] = {}  # this worker's current env (one: an env with its renderer,
-_LOCALIZERS: dict[Path, AppearanceLocalizer] = {}  # filter and movers holds ~100 MB; a worker
-# that kept every row's env ran out of memory), and the localizers of its current city
-
-
-@atexit.register
-def close_envs() -> None:
-    """Close the env this process made for :func:`run_robust_task`."""
-    while _ENVS:
-        _ENVS.popitem()[1].close()
+_LOCALIZERS: dict[Path, AppearanceLocalizer] = {}  # this worker's city's two localizers
 
 
 def _localizer(args: RobustnessConfig, city: int, condition: str) -> AppearanceLocalizer:
@@ -267,10 +257,7 @@ def run_robust_task(task: RobustTask) -> list[Episode]:
     args = task.config
     key = (dataclasses.astuple(dataclasses.replace(args, workers=1, ray_address="")),
            task.city, task.condition, task.source)
-    if key not in _ENVS:
-        close_envs()
-        _ENVS[key] = make_env(args, task.city, task.condition, task.source)
-    env = _ENVS[key]
+    env = worker_env(key, lambda: make_env(args, task.city, task.condition, task.source))
     agent = make_agent(args, task.agent, task.source, env.unwrapped.city)
     runs = run_episodes(env, agent, task.seeds, progress=False)
     path = task_path(task)
