@@ -39,8 +39,9 @@ test: setup
 bench: setup
 	$(NAV) bench --only env,gse,filter,global,appearance,coverage,parallel,noise,city60
 	$(NAV) bench --only agents
-	$(NAV) bench --only robustness --robustness-policies results/agents --robustness-workers 2 \
-		--robustness-episodes 12
+	$(NAV) bench --only robustness --robustness-workers 2 --robustness-episodes 12 \
+		--robustness-oracle-policy results/agents/oracle/oracle/policy.pt \
+		--robustness-belief-policy results/agents/belief/belief/policy.pt
 
 reproduce: setup
 	$(NAV) reproduce

@@ -24,7 +24,7 @@ markdown table (``make bench`` runs them all).
   side by side (``<parallel-out-dir>/bench_parallel.json`` / ``.md``);
 - city60: closed-loop tracking and the scripted agent on held-out 60 m cities (nine times the
   default area; ``<city60-out-dir>/bench_city60.json`` / ``.md``);
-- robustness: the scripted agent (and PPO with ``--robustness-policies``) on every pose source,
+- robustness: the scripted agent (and PPO with ``--robustness-oracle-policy`` / ``--robustness-belief-policy``) on every pose source,
   nominal, kidnapped, under each appearance preset and among moving vehicles, with success,
   SPL, collisions, time to goal and belief RMSE (``<robustness-out-dir>/bench_robustness.*``).
 
@@ -235,8 +235,9 @@ def _check_robustness_bench(c: RobustnessConfig) -> None:
         check_ray_address(c.ray_address)
     except (TypeError, ValueError) as err:
         raise UsageError("robustness_ray_address", str(err)) from None
-    if c.policies and not Path(c.policies).is_dir():
-        raise UsageError("robustness_policies", f"no such folder: {c.policies}")
+    for name in ("oracle_policy", "belief_policy"):
+        if getattr(c, name):
+            check_existing_file(f"robustness_{name}", getattr(c, name))
     check_output_dir("robustness_out_dir", c.out_dir)
 
 

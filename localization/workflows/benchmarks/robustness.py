@@ -23,9 +23,9 @@ random goals, the same reset seeds in every row:
   the lighting and camera presets their episodes would equal the nominal ones and are not
   run again (the table says "as nominal"); with moving things they are;
 * agents: the scripted navigator (it slows down on a doubtful belief and stops to look
-  around while lost: :class:`agents.scripted.ScriptedAgent`) and, with ``policies``, PPO
-  (the policy trained on the true pose on the oracle, the one trained on the belief on the
-  other sources).
+  around while lost: :class:`agents.scripted.ScriptedAgent`) and, with ``oracle_policy`` and
+  ``belief_policy``, PPO (the policy trained on the true pose on the oracle, the one trained
+  on the belief on the other sources).
 
 The episodes are split into tasks by (city, condition, source, agent, seeds) and run by
 :func:`~localization.workflows.parallel.map_tasks` (``workers`` local processes or Ray); an
@@ -91,10 +91,13 @@ class RobustnessConfig:
     sources: str = field(default=",".join(SOURCES), metadata={
         "help": "comma-separated pose sources: " + ", ".join(SOURCES)})
     agents: str = field(default="scripted,ppo", metadata={
-        "help": "comma-separated: scripted, ppo (ppo runs when --robustness-policies has them)"})
-    policies: str = field(default="", metadata={
-        "help": "folder with oracle/policy.pt and belief/policy.pt (appearance-nav train); "
-                "empty: no PPO rows"})
+        "help": "comma-separated: scripted, ppo (ppo runs when both policies are given)"})
+    oracle_policy: str = field(default="", metadata={
+        "help": "PPO policy.pt trained on the true pose (appearance-nav train or the agents "
+                "benchmark); empty: no PPO rows"})
+    belief_policy: str = field(default="", metadata={
+        "help": "PPO policy.pt trained on the belief, run on every other source; empty: no "
+                "PPO rows"})
     episodes: int = field(default=100, metadata={"help": "episodes per row and city"})
     seed: int = field(default=3_000_000, metadata={"help": "first reset seed"})
     kidnap_at: int = field(default=40, metadata={"help": "step of the kidnap ('kidnap' rows)"})
@@ -248,7 +251,7 @@ def make_agent(args: RobustnessConfig, agent: str, source: str, city: Any) -> An
 
 
 def policy_path(args: RobustnessConfig, source: str) -> Path:
-    return Path(args.policies) / ("oracle" if source == "oracle" else "belief") / "policy.pt"
+    return Path(args.oracle_policy if source == "oracle" else args.belief_policy)
 
 
 def run_robust_task(task: RobustTask) -> list[Episode]:
@@ -290,9 +293,10 @@ def load_task(task: RobustTask) -> list[Episode] | None:
 def _rows(args: RobustnessConfig, names: dict[str, list[str]]) -> list[tuple[str, str, str]]:
     """The (agent, source, condition) rows to run (PPO only with both policies)."""
     agents = [a for a in names["agents"] if a != "ppo" or (
-        args.policies and all(policy_path(args, s).exists() for s in ("oracle", "ekf")))]
+        args.oracle_policy and args.belief_policy)]
     if "ppo" in names["agents"] and "ppo" not in agents:
-        print(f"robustness: no PPO rows (no policies in {args.policies!r}: appearance-nav train)")
+        print("robustness: no PPO rows (give --robustness-oracle-policy and "
+              "--robustness-belief-policy)")
     return [(a, s, c) for a in agents for c in names["conditions"] for s in names["sources"]
             if runs_condition(s, c)]
 
