@@ -46,6 +46,7 @@ from localization.cli._args import (
     check_choice,
     check_choices,
     check_env,
+    check_existing_file,
     check_int_list,
     check_numbers,
     check_output_dir,

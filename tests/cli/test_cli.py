@@ -200,3 +200,15 @@ def test_bench_gse_runs_its_scaling_workers(tmp_path: Path) -> None:
     assert [r["n"] for r in result["scaling"]] == [200, 300]
     assert all("fit_s" in r for r in result["scaling"]), result["scaling"]
     assert "| 300 |" in out.with_suffix(".md").read_text()
+
+
+def test_bench_robustness_names_a_missing_policy(tmp_path) -> None:
+    """A PPO policy file that does not exist is named before any benchmark starts."""
+    import subprocess
+    import sys
+
+    missing = tmp_path / "policy.pt"
+    run = subprocess.run([sys.executable, "-m", "localization.cli", "bench", "--only", "robustness",
+                          "--robustness-belief-policy", str(missing)],
+                         capture_output=True, text=True, check=False)
+    assert run.returncode == 2 and "--robustness-belief-policy: no such file" in run.stderr
