@@ -39,6 +39,7 @@ from gymnasium import spaces
 from numpy.typing import ArrayLike
 
 from localization._validation import check_bool, check_choice, check_options, check_seed
+from localization.districts import DistrictLocalizer
 from localization.filtering.belief import BeliefFilter
 from localization.filtering.ekf import PoseEKF, check_gate_probability
 from localization.filtering.free_space import city_sampler
@@ -133,9 +134,11 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
     env : gymnasium.Env
         An ``AppearanceNav-v0`` env (Dict observation with ``image`` and ``goal``;
         ``env.unwrapped.motion_model`` is F).
-    localizer : AppearanceLocalizer
+    localizer : AppearanceLocalizer or DistrictLocalizer
         Fitted for the same camera and image size, with its noise model
-        (:meth:`~localization.localizer.AppearanceLocalizer.fit_noise`).
+        (:meth:`~localization.localizer.AppearanceLocalizer.fit_noise`). A
+        :class:`~localization.districts.DistrictLocalizer` (a large city, one map per
+        district) runs with ``filter="ekf"``, which hands over between districts.
     measurement : {"pose", "features", "representation"}
         The measurement model of the update (the particles' likelihood).
     keep_image : bool
@@ -176,7 +179,7 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
     (from ``info["pose"]``, for evaluation only).
     """
 
-    def __init__(self, env: gym.Env, localizer: AppearanceLocalizer,
+    def __init__(self, env: gym.Env, localizer: AppearanceLocalizer | DistrictLocalizer,
                  measurement: str = "representation", keep_image: bool = False,
                  gate_probability: float | None = 0.997, relocalize_after: int | None = 50,
                  inflate_after: int | None = 3, filter: str = "ekf",
@@ -205,6 +208,9 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
                 localizer, mm, measurement, gate_probability, relocalize_after,
                 inflate_after=inflate_after, **options)
         else:
+            if isinstance(localizer, DistrictLocalizer):
+                raise ValueError("filter 'particles' needs one map of the whole city; a "
+                                 "DistrictLocalizer runs with filter='ekf'")
             if gate_probability is None:
                 raise ValueError("filter 'particles' needs a gate_probability in (0, 1) "
                                  "(its distances are capped there), got None")
@@ -219,10 +225,11 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         self._localize = "image"
 
     @staticmethod
-    def _check_compatible(env: gym.Env, localizer: AppearanceLocalizer) -> None:
-        if not isinstance(localizer, AppearanceLocalizer):
-            raise TypeError("localizer must be a fitted AppearanceLocalizer, got "
-                            f"{type(localizer).__name__}")
+    def _check_compatible(env: gym.Env, localizer: AppearanceLocalizer | DistrictLocalizer
+                          ) -> None:
+        if not isinstance(localizer, (AppearanceLocalizer, DistrictLocalizer)):
+            raise TypeError("localizer must be a fitted AppearanceLocalizer or "
+                            f"DistrictLocalizer, got {type(localizer).__name__}")
         localizer.check_ready()
         image_shape = tuple(env.observation_space["image"].shape[:2])
         if image_shape != tuple(localizer.image_size_):

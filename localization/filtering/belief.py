@@ -52,7 +52,13 @@ from localization.geometry import Array
 class Localizer(Protocol):
     """What the belief needs from a fitted localizer (e.g.
     :class:`~localization.localizer.AppearanceLocalizer`): measurement models, the noise
-    model and an initial belief from one image's features."""
+    model and an initial belief from one image's features.
+
+    A localizer of several maps (:class:`~localization.districts.DistrictLocalizer`) also
+    has ``local(x)``: the localizer in charge at pose x. The belief then measures each
+    image, and takes its measurement model, from the one in charge at its prior mean (a
+    hand-over between districts); ``initial_belief`` and ``measure(w, "pose")`` need no
+    pose."""
 
     control_gain_: Any
 
@@ -122,6 +128,8 @@ class BeliefFilter:
     ----------
     ekf : PoseEKF or None
         None before :meth:`reset`.
+    model : measurement model or None
+        The one of the last update (a localizer with ``local``: None before it).
     last_update : UpdateResult or None
     belief_status : one of ``BELIEF_STATUSES``
     monitor : DivergenceMonitor or None
@@ -152,9 +160,9 @@ class BeliefFilter:
         self.alpha = localizer.consistency(measurement) if alpha is None else \
             np.asarray(alpha, dtype=np.float64)
         self.noise = noise
-        self.model = localizer.measurement_model(measurement, alpha=self.alpha) \
-            if noise == "global" else \
-            localizer.measurement_model(measurement, alpha=self.alpha, noise=noise)
+        self._models: dict[int, Any] = {}  # measurement model per (district) localizer
+        self.model = None if callable(getattr(localizer, "local", None)) else \
+            self._local(None)[1]
         self.gain = np.asarray(localizer.control_gain_, dtype=np.float64)
         self.ekf: PoseEKF | None = None
         self.last_update: UpdateResult | None = None
@@ -165,7 +173,6 @@ class BeliefFilter:
         self._confirm = 0
         self._forced = self._lost_now = self._doubtful_now = False
         self._trial: dict[str, Any] | None = None  # the EKF a restart replaced, on trial
-        self._z = np.zeros(0)  # the last step's measurement of the image
 
     @property
     def x(self) -> Array:
@@ -182,6 +189,29 @@ class BeliefFilter:
     def _check(self) -> None:
         if self.ekf is None:
             raise RuntimeError("the belief is not initialised: call reset() first")
+
+    def _local(self, x: Array | None) -> tuple[Localizer, Any]:
+        """The localizer in charge at pose ``x`` and its measurement model: the localizer
+        itself, or for one with ``local(x)`` (a
+        :class:`~localization.districts.DistrictLocalizer`) the district at ``x``."""
+        local = getattr(self.localizer, "local", None)
+        view = self.localizer if x is None or not callable(local) else local(x)
+        model = self._models.get(id(view))
+        if model is None:
+            options = {} if self.noise == "global" else {"noise": self.noise}
+            model = view.measurement_model(self.measurement, alpha=self.alpha, **options)
+            self._models[id(view)] = model
+        return view, model
+
+    def _measurement(self, x: Array, w: Array) -> tuple[Array, Any]:
+        """The measurement z of image ``w`` and its model, by the localizer in charge at
+        ``x``; the model has observed ``w``."""
+        view, model = self._local(x)
+        z = view.measure(w, self.measurement)
+        observe = getattr(model, "observe", None)
+        if callable(observe) and np.all(np.isfinite(z)):
+            observe(w)  # an R that depends on the image (heteroscedastic)
+        return z, model
 
     def _Q(self, x: Array, u: Array) -> Array:
         return self.localizer.process_noise(x, alpha=self.alpha)
@@ -299,10 +329,9 @@ class BeliefFilter:
         image does not fit is refused; the belief is left alone)."""
         prior, kept, forced = self.ekf, (self.misses, self.gated), self._forced
         self._start(x0, P0)
-        z = self._z  # this step's measurement (_update)
-        self._observe(w)
+        z, model = self._measurement(self.ekf.x, w)
         try:
-            ok = bool(np.all(np.isfinite(z))) and self.ekf.update(z, self.model).accepted
+            ok = bool(np.all(np.isfinite(z))) and self.ekf.update(z, model).accepted
         except OutOfDomainError:
             ok = False
         if not ok and not forced:
@@ -321,9 +350,9 @@ class BeliefFilter:
         assert trial is not None and self.ekf is not None
         old: PoseEKF = trial["ekf"]
         old.predict(self.gain * np.asarray(u, dtype=np.float64))
-        z = self._z  # this step's measurement (_update)
+        z, model = self._measurement(old.x, w)
         try:
-            took = bool(np.all(np.isfinite(z))) and old.update(z, self.model).accepted
+            took = bool(np.all(np.isfinite(z))) and old.update(z, model).accepted
         except OutOfDomainError:
             took = False
         trial["misses"] = 0 if took else trial["misses"] + 1
@@ -358,19 +387,11 @@ class BeliefFilter:
         self.belief_status = "lost" if lost else "doubtful" if self._doubtful_now \
             else "tracking"
 
-    def _observe(self, w: Array) -> None:
-        """Tell a measurement model whose R depends on the image (``observe(w)``, e.g. the
-        heteroscedastic one) which image the next update uses."""
-        observe = getattr(self.model, "observe", None)
-        if callable(observe):
-            observe(w)
-
     def _update(self, w: Array) -> tuple[float, str]:
         assert self.ekf is not None
-        z = self._z = self.localizer.measure(w, self.measurement)  # reused by the monitor
+        z, self.model = self._measurement(self.ekf.x, w)
         if not np.all(np.isfinite(z)):
             return np.nan, "out_of_domain"
-        self._observe(w)
         try:
             self.last_update = self.ekf.update(z, self.model)
         except OutOfDomainError:

@@ -70,16 +70,25 @@ def symmetric_edges(ind: NDArray[np.intp], allowed: NDArray[np.bool_] | None = N
     return (key // n).astype(np.intp), (key % n).astype(np.intp)
 
 
+class DisconnectedGraphError(ValueError):
+    """The neighbourhood graph falls apart; ``labels`` (n,) gives each sample's component."""
+
+    def __init__(self, message: str, labels: NDArray[np.intp]) -> None:
+        super().__init__(message)
+        self.labels = labels
+
+
 def check_connected(n: int, ei: NDArray[np.intp], ej: NDArray[np.intp], what: str) -> int:
-    """Number of connected components; ValueError if more than one."""
+    """Number of connected components; :class:`DisconnectedGraphError` (a ValueError) if
+    more than one."""
     A = sparse.coo_matrix((np.ones(len(ei)), (ei, ej)), shape=(n, n)).tocsr()
     n_comp, labels = connected_components(A, directed=False)
     if n_comp > 1:
         sizes = np.bincount(labels)
-        raise ValueError(
+        raise DisconnectedGraphError(
             f"the neighbourhood graph of {what} has {n_comp} connected components (sizes "
             f"{sorted(sizes.tolist(), reverse=True)[:10]}): GSE would place them arbitrarily. "
-            "Increase n_neighbors (or bandwidth), or fit one model per component.")
+            "Increase n_neighbors (or bandwidth), or fit one model per component.", labels)
     return int(n_comp)
 
 

@@ -53,6 +53,7 @@ from envs.lanes import street_tour
 from envs.off_lane import OffLanePilot
 from localization._validation import check_real
 from localization.geometry import Array, wrap_angle
+from localization.districts import DistrictLocalizer
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer, city_info
 from localization.workflows.quality import quality_report, warn_quality
 from localization.wrappers import BeliefWrapper
@@ -88,7 +89,8 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
                        calibrate_on_belief: bool = True,
                        measurements: tuple[str, ...] = MEASUREMENTS, progress: bool = False,
                        quality_steps: int | None = None,
-                       ) -> tuple[AppearanceLocalizer, dict[str, float]]:
+                       districts: tuple[int, int] | None = None, overlap: float = 4.0,
+                       ) -> tuple[AppearanceLocalizer | DistrictLocalizer, dict[str, float]]:
     """Fit an :class:`AppearanceLocalizer` and its noise model on the env's city.
 
     Parameters
@@ -119,6 +121,10 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
     quality_steps : int, optional
         Steps of the held-out drive of the quality report (seed ``seed + 3``; default
         ``n_drive``; 0 skips it: its scores are then NaN).
+    districts : (int, int), optional
+        Fit a :class:`~localization.districts.DistrictLocalizer` with this grid of
+        districts (``overlap`` metres of hand-over zone), each an AppearanceLocalizer of
+        ``localizer_params``: for large cities, where one map folds.
 
     Returns
     -------
@@ -141,7 +147,8 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
     _check_training(lanes)
     seconds = {}
     t0 = time.perf_counter()
-    loc = AppearanceLocalizer(**{"noise_folds": 0, **(localizer_params or {})})
+    params = {"noise_folds": 0, **(localizer_params or {})}
+    loc: AppearanceLocalizer | DistrictLocalizer = AppearanceLocalizer(**params)
     if lanes == "free":
         images, poses = collect_dataset(env, n_train, "coverage", seed=seed, progress=progress,
                                         **(lane_options or {}))
@@ -151,6 +158,8 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
                                         lanes=lanes, **(lane_options or {}))
     seconds["collect"] = time.perf_counter() - t0
     t0 = time.perf_counter()
+    if districts is not None:
+        loc = DistrictLocalizer(grid=districts, overlap=overlap, localizer_params=params)
     loc.fit(images, poses, camera=getattr(env.unwrapped, "camera_name", None),
             city=city_info(env))
     seconds["fit"] = time.perf_counter() - t0

@@ -1,0 +1,111 @@
+"""Noise model of :class:`~localization.districts.DistrictLocalizer` (a mixin): Q and the
+control gains from a recorded drive, R pooled over the districts for the pose-like models
+and per district for the features, and the consistency of the hand-over filter.
+
+The host class provides ``districts_``, ``_views``, ``cells_``, ``overlap``,
+``n_features_``, ``district_of``, ``transform``, ``check_ready`` and ``_check_fitted``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from localization._localizer_noise import MEASUREMENTS
+from localization.filtering.calibration import calibrate_consistency
+from localization.geometry import Array
+from localization.localizer import AppearanceLocalizer
+
+__all__ = ["DistrictNoiseMixin", "inside"]
+
+_MIN_FRAMES = 200  # the correlation time's blocks (measurement_noise.correlation_time)
+
+
+def inside(xy: Array, box: Array, margin: float = 0.0) -> Array:
+    """Mask (n,) of the points (n, 2) within ``margin`` of the box [x0, y0, x1, y1]."""
+    return ((xy[:, 0] >= box[0] - margin) & (xy[:, 0] <= box[2] + margin)
+            & (xy[:, 1] >= box[1] - margin) & (xy[:, 1] <= box[3] + margin))
+
+
+class DistrictNoiseMixin:
+    """Noise-model methods of the district localizer."""
+
+    districts_: list[AppearanceLocalizer]
+    _views: list[Any]
+    cells_: Array
+    overlap: float
+    n_features_: int
+    consistency_: dict[str, Array]
+    quality_: dict[str, float]
+
+    def fit_noise(self, motion_model: Any, images: ArrayLike, poses: ArrayLike,
+                  controls: ArrayLike) -> Any:
+        """Q, the control gains and R from one recorded drive (see the module docstring);
+        arguments as :meth:`AppearanceLocalizer.fit_noise`. Resets the consistency."""
+        self._check_fitted()
+        images, poses, controls = AppearanceLocalizer._check_drive(images, poses, controls)
+        first = self.districts_[0].fit_process_noise(motion_model, poses, controls)
+        self.control_gain_ = np.array(first.control_gain_)
+        self.process_noise_body_ = np.array(first.process_noise_body_)
+        for d, view in zip(self.districts_, self._views):
+            d.control_gain_, d.process_noise_body_ = self.control_gain_, self.process_noise_body_
+            view.control_gain_ = self.control_gain_
+        W = self.transform(images)
+        pooled = self._pooled_residuals(W, poses)
+        thin = []
+        for k, view in enumerate(self._views):
+            res = dict(pooled)
+            region = inside(poses[:, :2], self.cells_[k], float(self.overlap))
+            if region.sum() >= self._min_frames():
+                d = view.localizer
+                res["features"] = d._residuals(d.regressor_, view.select(W[region]),
+                                               poses[region])["features"]
+            else:
+                thin.append(f"{k} ({int(region.sum())} frames)")
+            view.localizer._set_noise(res, sequence=True)
+            view.localizer.consistency_, view.localizer.quality_ = {}, {}
+        if thin:
+            warnings.warn(f"the drive passes too few frames through districts {', '.join(thin)} "
+                          f"(< {self._min_frames()}) for their features' R: their training "
+                          "residuals' stays (a longer drive estimates it)", RuntimeWarning,
+                          stacklevel=2)
+        self.consistency_, self.quality_ = {}, {}
+        return self
+
+    def _min_frames(self) -> int:
+        """Drive frames a district needs for its own features' R (a covariance of m
+        components and its correlation time)."""
+        return max(2 * self.n_features_, _MIN_FRAMES)
+
+    def _pooled_residuals(self, W: Array, poses: Array) -> dict[str, Array]:
+        """Body-frame "pose" and "representation" residuals (n, 3) of the drive's frames,
+        each from the district of its true pose (NaN rows out of its domain)."""
+        owner = np.array([self.district_of(p) for p in poses])
+        out = {k: np.full((len(poses), 3), np.nan) for k in ("pose", "representation")}
+        for k, view in enumerate(self._views):
+            rows = owner == k
+            if not rows.any():
+                continue
+            d = view.localizer
+            res = d._residuals(d.regressor_, view.select(W[rows]), poses[rows])
+            for name, rows_out in out.items():
+                rows_out[rows] = res[name]
+        return out
+
+    def calibrate(self, motion_model: Any, images: ArrayLike, poses: ArrayLike,
+                  controls: ArrayLike, measurements: tuple[str, ...] = MEASUREMENTS,
+                  gate_probability: float | None = 0.997) -> Any:
+        """Consistency of the hand-over filter on a recorded drive (as
+        :meth:`AppearanceLocalizer.calibrate`); sets ``consistency_[measurement]``."""
+        self.check_ready()
+        images, poses, controls = AppearanceLocalizer._check_drive(images, poses, controls)
+        W = self.transform(images)
+        start = self.districts_[self.district_of(poses[0])]
+        self.consistency_.update(calibrate_consistency(
+            self, motion_model, W, poses, controls, measurements, gate_probability,
+            start.noise_["pose"]))
+        self.quality_ = {}
+        return self

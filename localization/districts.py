@@ -1,0 +1,393 @@
+"""DistrictLocalizer: one appearance localizer per overlapping district of a large city.
+
+One GSE embedding of a whole 60 m street network folds: on tuning city 53 (48000 street
+images) psi*'s median error was 10.1 m, where a localizer fitted on one quadrant of the same
+images reached 0.32 m (docs/benchmarks.md §10). A city is therefore cut into a grid of
+districts (``grid`` cells of the training poses' bounding box); each district's
+:class:`~localization.localizer.AppearanceLocalizer` (its own features and GSE maps) is
+fitted on the images within ``overlap`` metres of its cell, so near a cell's edge the next
+district's maps hold too.
+
+The features of an image are those of every district side by side (``transform``: n x
+(K m)). A filter hands over between districts by the belief: :meth:`DistrictLocalizer.local`
+returns the district whose cell holds the pose (a :class:`District`: the
+:class:`~localization.filtering.belief.Localizer` interface on its block of the features),
+and :class:`~localization.filtering.belief.BeliefFilter` measures each image with the
+district at its prior mean. Without a pose (the first image, a restart) :meth:`initial_belief`
+asks every district and keeps the answer that lies in its own district and whose image lies
+closest to that district's feature manifold (the novelty ``|w - g(r*(w))|`` relative to the
+district's median on its training images).
+
+Noise (:meth:`DistrictLocalizer.fit_noise`): Q and the control gains from the drive; R of
+the pose-like models ("pose", "representation": body-frame pose errors, comparable between
+districts) pooled over the drive's frames, each measured by the district of its true pose;
+the features' R per district from the drive's frames in its region (at least
+``max(2 m, 200)`` of them), else the district's in-sample training residuals (a ``RuntimeWarning``
+names those districts). Consistency is calibrated on the whole hand-over filter.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+from sklearn.exceptions import NotFittedError
+
+from localization._districts_io import load_districts, save_districts
+from localization._districts_noise import DistrictNoiseMixin, inside
+from localization._localizer_noise import MEASUREMENTS, check_data, novelty
+from localization._validation import check_array, check_int, check_real
+from localization.geometry import Array, body_to_world
+from localization.gse.graph import DisconnectedGraphError
+from localization.localizer import AppearanceLocalizer
+
+__all__ = ["District", "DistrictLocalizer", "district_cells"]
+
+_NOVELTY_SAMPLE = 500  # training images per district for its median novelty
+_RESIDUAL_SAMPLE = 3000  # training images per district for its provisional noise
+_DROP_SHARE = 0.02  # at most this share of a district's images may be dropped as cut off
+_REFITS = 3
+
+
+def district_cells(poses: ArrayLike, grid: tuple[int, int]) -> Array:
+    """Cells (K, 4) ``[x0, y0, x1, y1]`` of a ``grid`` (nx, ny) split of the poses' bounding
+    box, row by row (y), K = nx * ny."""
+    xy = np.asarray(poses, dtype=np.float64)[:, :2]
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    xs = np.linspace(lo[0], hi[0], grid[0] + 1)
+    ys = np.linspace(lo[1], hi[1], grid[1] + 1)
+    return np.array([[xs[i], ys[j], xs[i + 1], ys[j + 1]]
+                     for j in range(grid[1]) for i in range(grid[0])])
+
+
+class District:
+    """The :class:`~localization.filtering.belief.Localizer` of district ``index`` of a
+    :class:`DistrictLocalizer`: its localizer on its block of the concatenated features w
+    (K m,), with the parent's consistency."""
+
+    def __init__(self, parent: DistrictLocalizer, index: int) -> None:
+        self.parent, self.index = parent, index
+        self.localizer: AppearanceLocalizer = parent.districts_[index]
+        m = parent.n_features_
+        self._block = slice(index * m, (index + 1) * m)
+        self.control_gain_ = parent.control_gain_
+
+    def select(self, w: ArrayLike) -> Array:
+        """This district's features (m,) out of the concatenated w (K m,)."""
+        return np.asarray(w, dtype=np.float64)[..., self._block]
+
+    def measure(self, w: ArrayLike, measurement: str) -> Array:
+        """The district's measurement of the named model from the concatenated w."""
+        return self.localizer.measure(self.select(w), measurement)
+
+    def measurement_model(self, measurement: str, alpha: ArrayLike | None = None,
+                          **options: Any) -> Any:
+        """The district's model; one that observes the image (heteroscedastic R) is given
+        this district's block of w."""
+        alpha = self.consistency(measurement) if alpha is None else alpha
+        model = self.localizer.measurement_model(measurement, alpha=alpha, **options)
+        observe = getattr(model, "observe", None)
+        if callable(observe):
+            model.observe = lambda w: observe(self.select(w))
+        return model
+
+    def consistency(self, measurement: str) -> Array:
+        return self.parent.consistency(measurement)
+
+    def process_noise(self, pose: ArrayLike, alpha: ArrayLike | None = None) -> Array:
+        return self.localizer.process_noise(pose, alpha)
+
+    def initial_belief(self, w: ArrayLike) -> tuple[Array, Array]:
+        return self.localizer.initial_belief(self.select(w))
+
+    def prior(self) -> tuple[Array, Array]:
+        return self.parent.prior()
+
+
+class DistrictLocalizer(DistrictNoiseMixin):
+    """Localize a camera in a large city with one :class:`AppearanceLocalizer` per district.
+
+    Parameters
+    ----------
+    grid : (int, int)
+        Districts along x and y (cells of the training poses' bounding box).
+    overlap : float
+        Metres around each cell whose images its district is fitted on too (the hand-over
+        zone; at least the belief's error plus a step's travel).
+    localizer_params : dict, optional
+        Keyword arguments of each district's :class:`AppearanceLocalizer` (default
+        ``noise_folds=0``: the noise comes from :meth:`fit_noise`).
+
+    Attributes
+    ----------
+    districts_ : list of AppearanceLocalizer
+        One per cell, fitted on the images of its region (cell + ``overlap``).
+    cells_ : ndarray (K, 4)
+        ``[x0, y0, x1, y1]`` of each district's cell.
+    n_features_ : int
+        Features per district (m); :meth:`transform` returns K m.
+    train_index_ : list of ndarray
+        The training images (indices) each district was fitted on: those within ``overlap``
+        of its cell, less a few views cut off from the rest of its neighbourhood graph (at
+        most 2 %).
+    n_train_ : ndarray (K,)
+        Training images per district.
+    novelty_scale_ : ndarray (K,)
+        Median novelty of each district's training images (the unit of
+        :meth:`initial_belief`'s choice).
+    consistency_ : dict of str -> ndarray (3,)
+    control_gain_, process_noise_body_ :
+        From :meth:`fit_noise`, shared by the districts.
+    camera_, image_size_, city_ :
+        As the districts'.
+    quality_ : dict
+    """
+
+    def __init__(self, grid: tuple[int, int] = (3, 3), overlap: float = 4.0,
+                 localizer_params: dict[str, Any] | None = None) -> None:
+        self.grid = grid
+        self.overlap = overlap
+        self.localizer_params = localizer_params
+
+    # ------------------------------------------------------------------ fit
+    def _check_params(self) -> tuple[int, int]:
+        if not isinstance(self.grid, (tuple, list)) or len(self.grid) != 2:
+            raise ValueError(f"grid must be a pair (nx, ny) of district counts, got {self.grid!r}")
+        grid = (check_int(self.grid[0], "grid[0]", low=1), check_int(self.grid[1], "grid[1]", low=1))
+        check_real(self.overlap, "overlap", low=0.0)
+        if self.localizer_params is not None and not isinstance(self.localizer_params, dict):
+            raise TypeError(f"localizer_params must be a dict, got "
+                            f"{type(self.localizer_params).__name__}")
+        return grid
+
+    def fit(self, images: ArrayLike, poses: ArrayLike, *, camera: str | None = None,
+            city: dict[str, Any] | None = None, progress: bool = False) -> DistrictLocalizer:
+        """Fit each district's localizer on the images of its region.
+
+        Parameters
+        ----------
+        images : ndarray (n, H, W, 3) uint8
+        poses : ndarray (n, 3)
+        camera, city :
+            As :meth:`AppearanceLocalizer.fit`.
+        progress : bool
+            A progress bar over the districts.
+
+        Returns
+        -------
+        self
+
+        Raises
+        ------
+        ValueError
+            If a district's region holds too few images to fit (fewer districts or more
+            overlap, or more images).
+        """
+        grid = self._check_params()
+        images, poses = check_data(images, poses)
+        self.cells_ = district_cells(poses, grid)
+        params = {"noise_folds": 0, **(self.localizer_params or {})}
+        self.districts_, self.train_index_, scales = [], [], []
+        bar = range(len(self.cells_))
+        if progress:
+            from tqdm import tqdm
+            bar = tqdm(bar, desc="districts", unit="district")
+        for k in bar:
+            keep = np.flatnonzero(inside(poses[:, :2], self.cells_[k], float(self.overlap)))
+            loc, keep = self._fit_district(k, images, poses, keep, camera, city, params)
+            self.districts_.append(loc)
+            self.train_index_.append(keep)
+            scales.append(self._novelty_scale(loc, images[keep]))
+        self.n_train_ = np.array([len(i) for i in self.train_index_])
+        self.novelty_scale_ = np.array(scales)
+        self.n_features_ = int(self.districts_[0].regressor_.n_features_in_)
+        self._poses_mean = np.array([*poses[:, :2].mean(axis=0), 0.0])
+        self._poses_cov = np.diag([*poses[:, :2].var(axis=0), np.pi ** 2 / 3.0])
+        self.consistency_: dict[str, Array] = {}
+        self.quality_: dict[str, float] = {}
+        self.control_gain_ = np.ones(2)
+        self.process_noise_body_: Array | None = None
+        self._set_views()
+        return self
+
+    def _set_views(self) -> None:
+        self._views = [District(self, k) for k in range(len(self.districts_))]
+
+    def get_params(self) -> dict[str, Any]:
+        """Constructor arguments (JSON-friendly)."""
+        return {"grid": list(self.grid), "overlap": float(self.overlap),
+                "localizer_params": self.localizer_params}
+
+    def save(self, path: str | Path) -> None:
+        """Save to the folder ``path`` (no pickle): ``districts.json`` and one
+        ``district_<k>.npz`` per district."""
+        self._check_fitted()
+        save_districts(self, path)
+
+    @classmethod
+    def load(cls, path: str | Path) -> DistrictLocalizer:
+        """Load a folder written by :meth:`save` (FileNotFoundError if there is none;
+        ValueError naming the file if it is corrupted)."""
+        return load_districts(cls, path)
+
+    @staticmethod
+    def _fit_district(k: int, images: Any, poses: Array, index: Array, camera: str | None,
+                      city: dict[str, Any] | None, params: dict[str, Any]
+                      ) -> tuple[AppearanceLocalizer, Array]:
+        """District k's localizer on the training images ``index``, and the indices it kept:
+        a few views whose neighbourhood graph is cut off from the rest (at most
+        ``_DROP_SHARE``) are dropped. Without a K-fold noise model it gets a provisional one
+        from its training residuals."""
+        for _ in range(_REFITS):
+            try:
+                loc = AppearanceLocalizer(**params).fit(images[index], poses[index],
+                                                        camera=camera, city=city)
+                break
+            except DisconnectedGraphError as err:
+                main = err.labels == np.argmax(np.bincount(err.labels))
+                if main.mean() < 1.0 - _DROP_SHARE:
+                    raise ValueError(f"district {k} ({len(index)} training images): {err}; "
+                                     "use fewer districts or more overlap") from err
+                index = index[main]
+        else:
+            raise ValueError(f"district {k}: its neighbourhood graph kept falling apart")
+        images, poses = images[index], poses[index]
+        if set(loc.noise_) != set(MEASUREMENTS):
+            sub = np.random.default_rng(k).permutation(len(poses))[:_RESIDUAL_SAMPLE]
+            W = loc.transform(images[sub])
+            loc._set_noise(loc._residuals(loc.regressor_, W, poses[sub]), sequence=False)
+        return loc, index
+
+    @staticmethod
+    def _novelty_scale(loc: AppearanceLocalizer, images: Any) -> float:
+        sub = np.random.default_rng(0).permutation(len(images))[:_NOVELTY_SAMPLE]
+        u = novelty(loc.regressor_, loc.transform(images[sub]))
+        u = u[np.isfinite(u)]
+        return float(np.median(u)) if len(u) and np.median(u) > 0 else 1.0
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "districts_"):
+            raise NotFittedError("this DistrictLocalizer is not fitted yet: call fit() first")
+
+    # ---------------------------------------------------------- features
+    @property
+    def camera_(self) -> str | None:
+        self._check_fitted()
+        return self.districts_[0].camera_
+
+    @property
+    def image_size_(self) -> tuple[int, int]:
+        self._check_fitted()
+        return self.districts_[0].image_size_
+
+    @property
+    def city_(self) -> dict[str, Any] | None:
+        self._check_fitted()
+        return self.districts_[0].city_
+
+    @property
+    def noise_(self) -> dict[str, Array]:
+        """The first district's R (the shapes a wrapper asks about)."""
+        self._check_fitted()
+        return self.districts_[0].noise_
+
+    def check_city(self, city: dict[str, Any] | None, *, allow_other_city: bool = False) -> None:
+        """As :meth:`AppearanceLocalizer.check_city`."""
+        self._check_fitted()
+        self.districts_[0].check_city(city, allow_other_city=allow_other_city)
+
+    def transform(self, images: ArrayLike) -> Array:
+        """Features of every district side by side, shape (n, K m)."""
+        self._check_fitted()
+        return np.concatenate([d.transform(images) for d in self.districts_], axis=1)
+
+    def _check_w(self, w: ArrayLike) -> Array:
+        w = check_array(w, "w").reshape(-1)
+        size = len(self.districts_) * self.n_features_
+        if w.shape != (size,):
+            raise ValueError(f"w must be the concatenated features of the {len(self.districts_)} "
+                             f"districts, shape ({size},), got {w.shape}")
+        return w
+
+    # ------------------------------------------------------ belief interface
+    def district_of(self, pose: ArrayLike) -> int:
+        """Index of the district whose cell holds ``pose`` (the nearest cell outside them)."""
+        self._check_fitted()
+        xy = np.asarray(pose, dtype=np.float64).reshape(-1)[:2]
+        c = self.cells_
+        dx = np.maximum(np.maximum(c[:, 0] - xy[0], xy[0] - c[:, 2]), 0.0)
+        dy = np.maximum(np.maximum(c[:, 1] - xy[1], xy[1] - c[:, 3]), 0.0)
+        return int(np.argmin(np.hypot(dx, dy)))
+
+    def local(self, pose: ArrayLike) -> District:
+        """The district in charge at ``pose`` (the filter measures with it)."""
+        return self._views[self.district_of(pose)]
+
+    def _candidates(self, w: Array) -> list[tuple[float, int, Array]]:
+        """(relative novelty, district, psi*) of every district whose psi*(w) lies in its own
+        region."""
+        out = []
+        for k, view in enumerate(self._views):
+            wk = view.select(w)
+            x = view.localizer.measure(wk, "pose")
+            if not np.all(np.isfinite(x)):
+                continue
+            if not inside(x[None, :2], self.cells_[k], float(self.overlap))[0]:
+                continue
+            u = float(novelty(view.localizer.regressor_, wk[None])[0])
+            if np.isfinite(u):
+                out.append((u / self.novelty_scale_[k], k, x))
+        return sorted(out, key=lambda c: c[0])
+
+    def measure(self, w: ArrayLike, measurement: str) -> Array:
+        """Without a pose only the pose can be measured: psi* of the district chosen as in
+        :meth:`initial_belief` (NaN when no district's maps hold); the other models depend on
+        the district: use ``local(pose).measure``."""
+        self._check_fitted()
+        if measurement != "pose":
+            raise ValueError(f"a DistrictLocalizer measures {measurement!r} with the district "
+                             "at a pose: use local(pose).measure(w, measurement)")
+        found = self._candidates(self._check_w(w))
+        return found[0][2] if found else np.full(3, np.nan)
+
+    def initial_belief(self, w: ArrayLike) -> tuple[Array, Array]:
+        """Belief from one image: the chosen district's psi*(w) and initial covariance (the
+        mean is NaN when no district's maps hold)."""
+        self.check_ready()
+        found = self._candidates(self._check_w(w))
+        if not found:
+            return np.full(3, np.nan), np.array(self._poses_cov)
+        _, k, x = found[0]
+        return x, body_to_world(self.districts_[k].initial_noise_, float(x[2]))
+
+    def prior(self) -> tuple[Array, Array]:
+        """Mean and covariance of all training poses (a know-nothing belief)."""
+        self._check_fitted()
+        return self._poses_mean.copy(), self._poses_cov.copy()
+
+    def consistency(self, measurement: str) -> Array:
+        """Calibrated body-frame inflation (3,) of the hand-over filter's model."""
+        return np.asarray(getattr(self, "consistency_", {}).get(measurement, np.ones(3)))
+
+    def measurement_model(self, measurement: str, alpha: ArrayLike | None = None,
+                          **options: Any) -> Any:
+        """The model of the district at a pose: use ``local(pose).measurement_model``."""
+        raise ValueError("a DistrictLocalizer's measurement model depends on the district: "
+                         "use local(pose).measurement_model(...)")
+
+    def process_noise(self, pose: ArrayLike, alpha: ArrayLike | None = None) -> Array:
+        """Q(x) (3, 3) at ``pose`` (shared by the districts)."""
+        return self.local(pose).process_noise(pose, alpha)
+
+    def check_ready(self) -> None:
+        """NotFittedError unless fitted with a noise model (:meth:`fit_noise`)."""
+        self._check_fitted()
+        for d in self.districts_:
+            d.check_ready()
+
+    def predict(self, images: ArrayLike) -> Array:
+        """psi* (n, 3) of images, each by the district chosen as in :meth:`initial_belief`
+        (NaN rows where no district's maps hold)."""
+        return np.array([self.measure(w, "pose") for w in self.transform(images)])
