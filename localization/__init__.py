@@ -9,6 +9,7 @@ The public names, grouped by layer (imports flow one way, top to bottom)::
     baselines     KernelRegressor, RetrievalRegressor (+ metrics, model_selection, ...)
     filtering     PoseEKF, BeliefFilter, ParticleBelief, noise models
     localizer     AppearanceLocalizer, city_info, OtherCityError
+    districts     DistrictLocalizer (one localizer per district of a large city)
     wrappers      BeliefWrapper, OracleWrapper, DeadReckoningWrapper
     workflows     fit_city_localizer, track_route, ... (import the simulator)
 
@@ -48,6 +49,7 @@ _LAZY = {
     # the localizer and its Gymnasium wrappers
     "AppearanceLocalizer": "localizer", "MEASUREMENTS": "localizer",
     "OtherCityError": "localizer", "city_info": "localizer",
+    "DistrictLocalizer": "districts", "load_localizer": "loading",
     "BeliefWrapper": "wrappers", "OracleWrapper": "wrappers",
     "DeadReckoningWrapper": "wrappers",
     # workflows (import the simulator)
@@ -60,6 +62,7 @@ __all__ = [
     "BeliefFilter",
     "BeliefWrapper",
     "DeadReckoningWrapper",
+    "DistrictLocalizer",
     "EfficientNetFeatures",
     "FeatureExtractor",
     "FunctionMeasurement",
@@ -87,6 +90,7 @@ __all__ = [
     "grid_search",
     "intrinsic_dimension_table",
     "jacobian_regression",
+    "load_localizer",
     "load_recorded",
     "make_features",
     "pose_residual",

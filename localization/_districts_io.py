@@ -1,66 +1,88 @@
-"""Persistence of :class:`~localization.districts.DistrictLocalizer` (no pickles).
+"""Persistence of :class:`~localization.districts.DistrictLocalizer` (one npz, no pickles).
 
-A folder: ``districts.json`` (the settings, cells and shared noise as JSON) and one
-``district_<k>.npz`` per district (:meth:`AppearanceLocalizer.save`).
+``settings``: the format, parameters, cells and shared noise as JSON; ``district/<k>``: the
+bytes of district k's own localizer file (:func:`~localization._localizer_io.save_localizer`).
 """
 
 from __future__ import annotations
 
+import io
 import json
+import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from localization._localizer_io import load_localizer, save_localizer
 from localization.localizer import AppearanceLocalizer
 
 FORMAT = "appearance-nav-districts/1"
-INDEX = "districts.json"
 _ARRAYS = ("cells_", "novelty_scale_", "n_train_", "control_gain_", "_poses_mean", "_poses_cov")
 
 
 def save_districts(loc: Any, path: str | Path) -> None:
-    """Write a fitted DistrictLocalizer to the folder ``path`` (created if missing)."""
-    folder = _check_path(path)
-    folder.mkdir(parents=True, exist_ok=True)
+    """Write a fitted DistrictLocalizer to ``path`` (``.npz``), creating its folder."""
+    path = _check_path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    districts = {}
     for k, d in enumerate(loc.districts_):
-        d.save(folder / f"district_{k}.npz")
+        buf = io.BytesIO()
+        save_localizer(d, buf)
+        districts[f"district/{k}"] = np.frombuffer(buf.getvalue(), dtype=np.uint8)
     pnb = loc.process_noise_body_
-    index = {"format": FORMAT, "params": loc.get_params(), "n_districts": len(loc.districts_),
-             "n_features": loc.n_features_,
-             "arrays": {a: np.asarray(getattr(loc, a)).tolist() for a in _ARRAYS},
-             "process_noise_body": None if pnb is None else np.asarray(pnb).tolist(),
-             "consistency": {k: np.asarray(v).tolist() for k, v in loc.consistency_.items()},
-             "quality": {k: float(v) for k, v in loc.quality_.items()}}
-    (folder / INDEX).write_text(json.dumps(index))
+    settings = {
+        "format": FORMAT, "params": loc.get_params(), "n_districts": len(loc.districts_),
+        "n_features": loc.n_features_,
+        "arrays": {a: np.asarray(getattr(loc, a)).tolist() for a in _ARRAYS},
+        "process_noise_body": None if pnb is None else np.asarray(pnb).tolist(),
+        "consistency": {k: np.asarray(v).tolist() for k, v in loc.consistency_.items()},
+        "quality": {k: float(v) for k, v in loc.quality_.items()}}
+    np.savez(path, settings=np.array(json.dumps(settings)), **districts)
+
+
+def read_settings(path: str | Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """The JSON settings and the arrays of a saved localizer file (either kind);
+    FileNotFoundError if there is none, ValueError naming the file if it is not one."""
+    path = _check_path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no saved localizer file {path}")
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            data = {k: f[k] for k in f.files}
+        settings = json.loads(str(data.pop("settings")))
+    except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile) as err:
+        raise ValueError(f"{path} is not a saved localizer: {err}") from None
+    if not isinstance(settings, dict):
+        raise ValueError(f"{path} is not a saved localizer (settings are not a JSON object)")  # noqa: TRY004
+    return settings, data
 
 
 def load_districts(cls: type, path: str | Path) -> Any:
     """Rebuild a DistrictLocalizer written by :func:`save_districts`; FileNotFoundError if
-    there is no such folder, ValueError (naming the file) if it is corrupted or incomplete."""
-    folder = _check_path(path)
-    if not (folder / INDEX).is_file():
-        raise FileNotFoundError(f"no saved DistrictLocalizer in {folder} (no {INDEX})")
+    there is no such file, ValueError (naming the file) if it is corrupted or incomplete."""
+    settings, data = read_settings(path)
+    if settings.get("format") != FORMAT:
+        raise ValueError(f"{path}: unknown format {settings.get('format')!r} (want {FORMAT})")
     try:
-        index = json.loads((folder / INDEX).read_text())
-        if index.get("format") != FORMAT:
-            raise ValueError(f"unknown format {index.get('format')!r} (want {FORMAT})")
-        params = dict(index["params"])
+        params = dict(settings["params"])
         params["grid"] = tuple(params["grid"])
         loc = cls(**params)
         for a in _ARRAYS:
-            setattr(loc, a, np.asarray(index["arrays"][a]))
-        loc.n_features_ = int(index["n_features"])
-        pnb = index["process_noise_body"]
+            setattr(loc, a, np.asarray(settings["arrays"][a]))
+        loc.n_features_ = int(settings["n_features"])
+        pnb = settings["process_noise_body"]
         loc.process_noise_body_ = None if pnb is None else np.asarray(pnb, dtype=np.float64)
         loc.consistency_ = {k: np.asarray(v, dtype=np.float64)
-                            for k, v in index["consistency"].items()}
-        loc.quality_ = {k: float(v) for k, v in index["quality"].items()}
-        n = int(index["n_districts"])
+                            for k, v in settings["consistency"].items()}
+        loc.quality_ = {k: float(v) for k, v in settings["quality"].items()}
+        loc.districts_ = [
+            load_localizer(AppearanceLocalizer, io.BytesIO(data[f"district/{k}"].tobytes()),
+                           name=f"{path} (district {k})")
+            for k in range(int(settings["n_districts"]))]
     except (ValueError, KeyError, TypeError, AttributeError) as err:
-        raise ValueError(f"{folder / INDEX}: corrupted or incomplete DistrictLocalizer "
+        raise ValueError(f"{path}: corrupted or incomplete DistrictLocalizer "
                          f"({type(err).__name__}: {err})") from err
-    loc.districts_ = [AppearanceLocalizer.load(folder / f"district_{k}.npz") for k in range(n)]
     loc._set_views()
     return loc
 

@@ -34,10 +34,12 @@ _ATTRS = {"noise": "noise_", "rms": "residual_rms_", "tau": "correlation_time_",
           "consistency": "consistency_"}
 
 
-def save_localizer(loc: Any, path: str | Path) -> None:
-    """Write a fitted localizer to ``path`` (``np.savez_compressed``), creating its folder."""
-    path = _check_path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+def save_localizer(loc: Any, path: str | Path | io.BytesIO) -> None:
+    """Write a fitted localizer to ``path`` (``np.savez_compressed``), creating its folder
+    (or into a buffer: a district of a :class:`~localization.districts.DistrictLocalizer`)."""
+    if not isinstance(path, io.BytesIO):
+        path = _check_path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
     buf = io.BytesIO()
     loc.regressor_.save(buf)
     settings = {"format": FORMAT, "params": loc.get_params(), "camera": loc.camera_,
@@ -58,12 +60,16 @@ def save_localizer(loc: Any, path: str | Path) -> None:
                         regressor=np.frombuffer(buf.getvalue(), dtype=np.uint8), **arrays)
 
 
-def load_localizer(cls: type, path: str | Path) -> Any:
+def load_localizer(cls: type, path: str | Path | io.BytesIO, name: str = "") -> Any:
     """Rebuild a localizer written by :func:`save_localizer`; ValueError if the file is not
-    one, or is corrupted or incomplete; FileNotFoundError if there is no such file."""
-    path = _check_path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no saved AppearanceLocalizer file {path}")
+    one, or is corrupted or incomplete; FileNotFoundError if there is no such file. A buffer
+    (``name`` says what it is in the errors) is read as such."""
+    if isinstance(path, io.BytesIO):
+        path = _Named(path, name)  # type: ignore[assignment]
+    else:
+        path = _check_path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"no saved AppearanceLocalizer file {path}")
     try:
         with np.load(path, allow_pickle=False) as f:
             data = {k: f[k] for k in f.files}
@@ -119,3 +125,14 @@ def _check_path(path: object) -> Path:
     if not isinstance(path, (str, Path)):
         raise TypeError(f"path must be a str or pathlib.Path, got {type(path).__name__}")
     return Path(path)
+
+
+class _Named(io.BytesIO):
+    """A buffer whose str() names it in load errors."""
+
+    def __init__(self, buf: io.BytesIO, name: str) -> None:
+        super().__init__(buf.getvalue())
+        self._name = name
+
+    def __str__(self) -> str:
+        return self._name

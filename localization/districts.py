@@ -221,15 +221,16 @@ class DistrictLocalizer(DistrictNoiseMixin):
                 "localizer_params": self.localizer_params}
 
     def save(self, path: str | Path) -> None:
-        """Save to the folder ``path`` (no pickle): ``districts.json`` and one
-        ``district_<k>.npz`` per district."""
+        """Save to one ``.npz`` (no pickle): the settings as JSON, each district's own
+        localizer file inside. The parent folder is created if missing."""
         self._check_fitted()
         save_districts(self, path)
 
     @classmethod
     def load(cls, path: str | Path) -> DistrictLocalizer:
-        """Load a folder written by :meth:`save` (FileNotFoundError if there is none;
-        ValueError naming the file if it is corrupted)."""
+        """Load a file written by :meth:`save` (FileNotFoundError if there is none;
+        ValueError naming the file if it is corrupted); ``localization.load_localizer``
+        loads either kind."""
         return load_districts(cls, path)
 
     @staticmethod

@@ -23,6 +23,8 @@ LAYERS: list[tuple[str, ...]] = [
     ("localization.filtering",),
     ("localization.localizer", "localization._localizer_io", "localization._localizer_noise",
      "localization._localizer_map", "localization._localizer_belief",
+     "localization.districts", "localization._districts_noise", "localization._districts_io",
+     "localization.loading",
      "localization.wrappers", "localization.wrapper_render", "localization.belief_render"),
     ("agents",),
     ("localization.workflows",),

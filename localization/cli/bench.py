@@ -209,8 +209,9 @@ def _check_noise_bench(c: NoiseBenchConfig) -> None:
 def _check_city60_bench(c: City60BenchConfig) -> None:
     check_int_list("city60_cities", c.cities, minimum=0)
     check_numbers(c, positive=("city_size", "image_size", "density", "n_components", "n_drive",
-                               "n_drives", "drive_steps", "episodes"),
-                  non_negative=("motion_noise", "max_episode_steps", "seed"), prefix="city60_")
+                               "n_drives", "drive_steps", "episodes", "districts"),
+                  non_negative=("motion_noise", "max_episode_steps", "seed", "overlap"),
+                  prefix="city60_")
     try:
         check_city_layout(c.city_size)
     except ValueError as err:

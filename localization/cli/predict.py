@@ -61,7 +61,7 @@ class Args:
 
 def load_checked(args: Args) -> tuple[AppearanceLocalizer, Path]:
     """Validate the options and load the localizer (fast), before reading any image."""
-    from localization.localizer import AppearanceLocalizer
+    from localization.loading import load_localizer
 
     if args.format not in FORMATS:
         raise UsageError("format", f"must be one of {', '.join(FORMATS)}, got {args.format!r}")
@@ -70,7 +70,7 @@ def load_checked(args: Args) -> tuple[AppearanceLocalizer, Path]:
         raise UsageError("localizer", f"no file at {args.localizer} (write one with "
                                 "'appearance-nav fit')")
     out = check_out(args.out, ".npz" if args.format == "npz" else "")
-    return AppearanceLocalizer.load(args.localizer), out
+    return load_localizer(args.localizer), out
 
 
 def report_errors(estimate: NDArray[np.float64], truth: NDArray[np.float64]) -> None:

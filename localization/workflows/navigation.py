@@ -44,6 +44,7 @@ from agents.evaluation import (
 from agents.ppo import PPOAgent
 from agents.scripted import ScriptedAgent
 from agents.sources import POSE_SOURCES, agent_episode_steps, make_pose_env
+from localization.loading import load_localizer
 from localization.localizer import AppearanceLocalizer
 from localization.workflows.agent_env import AgentEnvSettings, city_options
 from localization.workflows.parallel import RAY_ADDRESS_HELP, WORKERS_HELP, map_tasks, worker_env
@@ -137,7 +138,7 @@ _LOCALIZERS: dict[str, AppearanceLocalizer] = {}
 def _localizer(path: str) -> AppearanceLocalizer:
     """This process's copy of the localizer file (loaded once)."""
     if path not in _LOCALIZERS:
-        _LOCALIZERS[path] = AppearanceLocalizer.load(path)
+        _LOCALIZERS[path] = load_localizer(path)
     return _LOCALIZERS[path]
 
 
@@ -175,7 +176,7 @@ def _evaluate_serial(args: EvalConfig, pairs: list[tuple[str, str]],
     """Every pair's episodes in this process (one env per source; optional Rerun log)."""
     localizer = None
     if {source for _, source in pairs} - {"oracle"}:
-        localizer = AppearanceLocalizer.load(args.localizer)
+        localizer = load_localizer(args.localizer)
     seeds = range(args.seed, args.seed + args.episodes)
     log = RerunLog(args.rerun) if args.rerun else None
     runs = {}

@@ -26,6 +26,7 @@ import gymnasium as gym
 import numpy as np
 from tqdm import tqdm
 
+from localization.loading import load_localizer
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer, city_info
 from localization.workflows.plotting import plot_track
 from localization.workflows.rerun_log import RerunLog, RerunRecorder
@@ -80,7 +81,7 @@ def get_localizer(env: gym.Env, args: TrackConfig, out: Path
                   ) -> tuple[AppearanceLocalizer, dict]:
     """Load ``args.localizer`` or fit one on the city (saved to ``out/localizer.npz``)."""
     if args.localizer:
-        return AppearanceLocalizer.load(args.localizer), {}
+        return load_localizer(args.localizer), {}
     with warnings.catch_warnings():  # GSE's eigen-gap warning on a thin tube of poses
         warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
         loc, seconds = fit_city_localizer(env, args.n_train, args.lanes, args.n_drive,

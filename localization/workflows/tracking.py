@@ -52,8 +52,8 @@ from envs.datasets import (
 from envs.lanes import street_tour
 from envs.off_lane import OffLanePilot
 from localization._validation import check_real
-from localization.geometry import Array, wrap_angle
 from localization.districts import DistrictLocalizer
+from localization.geometry import Array, wrap_angle
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer, city_info
 from localization.workflows.quality import quality_report, warn_quality
 from localization.wrappers import BeliefWrapper

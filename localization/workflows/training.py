@@ -33,6 +33,7 @@ from agents.observations import NavigationObservation
 from agents.ppo import make_ppo, save_policy
 from agents.rewards import StreetProgressReward
 from agents.sources import POSE_SOURCES, make_pose_env
+from localization.loading import load_localizer
 from localization.localizer import AppearanceLocalizer
 from localization.workflows.agent_env import AgentEnvSettings, city_options
 
@@ -169,7 +170,7 @@ def train_agent(args: TrainConfig) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     localizer = None
     if args.pose_source != "oracle":
-        localizer = AppearanceLocalizer.load(args.localizer)
+        localizer = load_localizer(args.localizer)
     # fork the workers first (before this process opens a GL context); the city is checked
     # once, in this process, by the evaluation env's BeliefWrapper (OtherCityError)
     venv = make_vec_env(args, localizer, args.n_envs, args.seed, args.vec_env, check_city=False)

@@ -11,6 +11,7 @@ from sklearn.exceptions import NotFittedError
 from envs.datasets import collect_dataset
 from localization.districts import DistrictLocalizer, district_cells
 from localization.filtering.belief import BeliefFilter
+from localization.loading import load_localizer
 from localization.localizer import AppearanceLocalizer
 from localization.wrappers import BeliefWrapper
 from tests.localization.conftest import ignore_gse_warnings, make_env
@@ -152,17 +153,29 @@ def test_wrapper_runs_the_ekf_and_refuses_particles(split):
 
 def test_save_and_load_give_the_same_belief(split, drive, tmp_path):
     env = make_env()
-    split.save(tmp_path / "city")
-    back = DistrictLocalizer.load(tmp_path / "city")
+    split.save(tmp_path / "city.npz")
+    back = load_localizer(tmp_path / "city.npz")
+    assert isinstance(back, DistrictLocalizer)
     images, poses, controls = drive
     W = split.transform(images[:40])
     np.testing.assert_array_equal(back.transform(images[:40]), W)
     runs = [BeliefFilter(loc, env.unwrapped.motion_model).run(W, controls[:39], poses[0])
             for loc in (split, back)]
     np.testing.assert_array_equal(runs[0][0], runs[1][0])
-    (tmp_path / "city" / "districts.json").write_text("{not json")
-    with pytest.raises(ValueError, match="districts.json"):
-        DistrictLocalizer.load(tmp_path / "city")
-    with pytest.raises(FileNotFoundError):
-        DistrictLocalizer.load(tmp_path / "nowhere")
     env.close()
+
+
+def test_a_corrupt_file_names_itself(split, tmp_path):
+    path = tmp_path / "city.npz"
+    split.save(path)
+    with np.load(path) as f:
+        data = {k: f[k] for k in f.files}
+    data["district/1"] = data["district/1"][:100]  # a truncated district
+    np.savez(path, **data)
+    with pytest.raises(ValueError, match="district 1"):
+        DistrictLocalizer.load(path)
+    path.write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="city.npz"):
+        load_localizer(path)
+    with pytest.raises(FileNotFoundError):
+        DistrictLocalizer.load(tmp_path / "nowhere.npz")

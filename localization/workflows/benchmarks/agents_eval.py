@@ -23,6 +23,7 @@ from agents.evaluation import Episode, run_episodes, summarize
 from agents.ppo import PPOAgent
 from agents.scripted import ScriptedAgent
 from agents.sources import make_pose_env
+from localization.loading import load_localizer
 from localization.localizer import AppearanceLocalizer
 from localization.workflows.parallel import worker_env
 
@@ -83,7 +84,7 @@ def _make_env(task: EpisodeTask) -> Any:
     if task.source == "belief":
         path = localizer_path(task.localizers, task.city)
         if path not in _LOCALIZERS:
-            _LOCALIZERS[path] = AppearanceLocalizer.load(path)
+            _LOCALIZERS[path] = load_localizer(path)
         localizer = _LOCALIZERS[path]
         if task.detect_divergence:
             belief["filter_options"] = {"detect_divergence": True}

@@ -78,6 +78,11 @@ class City60BenchConfig:
     density: float = field(default=24.0, metadata={
         "help": "street-lane training images per square metre of street (chosen on city 53)"})
     n_components: int = field(default=64, metadata={"help": "PixelPCA components"})
+    districts: int = field(default=3, metadata={
+        "help": "a DistrictLocalizer of n x n districts (chosen on city 53); 1: one map of "
+                "the whole city"})
+    overlap: float = field(default=4.0, metadata={
+        "help": "metres of training images shared by neighbouring districts"})
     n_drive: int = field(default=1500, metadata={"help": "steps of each noise-calibration drive"})
     n_drives: int = field(default=3, metadata={"help": "street tours per city"})
     drive_steps: int = field(default=1000, metadata={"help": "steps of each street tour"})
@@ -93,7 +98,7 @@ class City60BenchConfig:
         if not self.quick:
             return self
         return dataclasses.replace(
-            self, cities=self.cities.split(",")[0], image_size=32, density=0.4,
+            self, cities=self.cities.split(",")[0], image_size=32, density=1.0,
             n_components=8, n_drive=200, n_drives=1, drive_steps=40, episodes=1,
             max_episode_steps=40)
 
@@ -117,7 +122,9 @@ def fit_city(args: City60BenchConfig, env: gym.Env) -> tuple[Any, dict[str, floa
         loc, seconds = fit_city_localizer(
             env, n_train=n_train, lanes="streets", n_drive=args.n_drive, seed=args.seed,
             localizer_params={"features_params": {"n_components": args.n_components}},
-            measurements=("representation",), quality_steps=0)
+            measurements=("representation",), quality_steps=0,
+            districts=None if args.districts == 1 else (args.districts, args.districts),
+            overlap=args.overlap)
     return loc, seconds, n_train
 
 

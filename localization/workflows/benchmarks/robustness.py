@@ -54,6 +54,7 @@ from agents.evaluation import Episode, as_records, run_episodes, summarize
 from agents.scripted import ScriptedAgent
 from agents.sources import make_pose_env
 from envs.conditions import PRESETS
+from localization.loading import load_localizer
 from localization.localizer import AppearanceLocalizer
 from localization.workflows.benchmarks.robustness_report import markdown, targets
 from localization.workflows.parallel import RAY_ADDRESS_HELP, WORKERS_HELP, map_tasks, worker_env
@@ -226,7 +227,7 @@ def _localizer(args: RobustnessConfig, city: int, condition: str) -> AppearanceL
     if path not in _LOCALIZERS:
         if len(_LOCALIZERS) >= 2:  # a city's daylight and randomised localizers
             _LOCALIZERS.clear()
-        _LOCALIZERS[path] = AppearanceLocalizer.load(path)
+        _LOCALIZERS[path] = load_localizer(path)
     return _LOCALIZERS[path]
 
 

@@ -24,6 +24,8 @@ from localization.workflows.tracking import street_train_size
     ("city_size", 5.0, "--city60-city-size"),
     ("n_drive", 100, "--city60-n-drive"),
     ("max_episode_steps", -1, "--city60-max-episode-steps"),
+    ("districts", 0, "--city60-districts"),
+    ("overlap", -1.0, "--city60-overlap"),
 ])
 def test_bad_options_are_named(field, value, option):
     args = Args(only="city60", city60=City60BenchConfig(**{field: value}))
@@ -57,7 +59,7 @@ def test_quick_run_end_to_end(tmp_path: Path):
     saved = json.loads((tmp_path / "bench_city60.json").read_text())
     table = (tmp_path / "bench_city60.md").read_text()
     s = saved["summary"]["51"]
-    assert s["n_train"] == math.ceil(0.4 * 2000)
+    assert s["n_train"] == math.ceil(1.0 * 2000)
     loop = s["closed_loop"]
     assert loop["drives"] == 1 and loop["rmse"] >= 0 and loop["rmse_dead_reckoning"] >= 0
     lo, hi = loop["nees_band"]
@@ -67,7 +69,7 @@ def test_quick_run_end_to_end(tmp_path: Path):
         assert agents["episodes"] == 1 and 0.0 <= agents["success_rate"] <= 1.0
         assert len(saved["records"]["51"]["agents"][source]) == 1
     assert saved["records"]["51"]["agents"]["belief"][0]["steps"] <= 40
-    assert "| 51 | 800 | 1 |" in table and "<= 0.20" in table
+    assert "| 51 | 2000 | 1 |" in table and "<= 0.20" in table
     assert "60 m" in saved["setup"]
 
 
