@@ -14,6 +14,11 @@ the localizer is fitted on a simulated city (lane images, then noise drives and 
 filter's calibration, as ``appearance-nav track`` does):
 
     appearance-nav fit --scene-seed 0 --n-train 6000 --out results/localizer.npz
+
+A large city gets one localizer per district (``--districts 3``: 3 x 3, a
+``DistrictLocalizer`` in the same kind of file; docs/method.md §12.1):
+
+    appearance-nav fit --city-size 60 --lanes streets --n-train 48000 --districts 3
 """
 
 from __future__ import annotations
@@ -67,6 +72,11 @@ class Args:
     n_train: int = field(default=6000, metadata={"help": "simulated city: training images"})
     n_drive: int = field(default=1000, metadata={
         "help": "simulated city: steps of each noise drive"})
+    districts: int = field(default=1, metadata={
+        "help": "simulated city: a DistrictLocalizer of N x N districts (large cities; 1: one "
+                "map)"})
+    overlap: float = field(default=4.0, metadata={
+        "help": "simulated city: metres of images neighbouring districts share"})
     seed: int = field(default=0, metadata={"help": "seed of the fit (and of the city's drives)"})
     out: str = field(default="results/localizer.npz", metadata={
         "help": "the saved localizer (.npz; its folder is created)"})
@@ -123,6 +133,10 @@ def fit_city(args: Args, out: Path) -> None:
         raise UsageError("n-train", f"must be >= 1, got {args.n_train}")
     if args.n_drive < MIN_DRIVE:  # the noise's correlation time needs 4 blocks of 50 steps
         raise UsageError("n-drive", f"must be >= {MIN_DRIVE}, got {args.n_drive}")
+    if args.districts < 1:
+        raise UsageError("districts", f"must be >= 1, got {args.districts}")
+    if args.overlap < 0:
+        raise UsageError("overlap", f"must be >= 0, got {args.overlap}")
     check_env(args)
     params = localizer_params(args)
     env = gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, city_size=args.city_size,
@@ -133,7 +147,9 @@ def fit_city(args: Args, out: Path) -> None:
             warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
             loc, seconds = fit_city_localizer(env, args.n_train, args.lanes, args.n_drive,
                                               seed=args.seed, localizer_params=params,
-                                              progress=True)
+                                              progress=True, districts=None if
+                                              args.districts == 1 else (args.districts,) * 2,
+                                              overlap=args.overlap)
     finally:
         env.close()
     print("fitted on city {} ({}): {}".format(

@@ -116,6 +116,8 @@ def test_fit_then_predict_recorded_folders(recorded, tmp_path):
     (["fit", "--data", "{drive}", "--out", "{tmp}/loc.txt"], ".npz"),
     (["fit", "--data", "{drive}", "--pose-file", "{tmp}/nope.txt"], "--pose-file"),
     (["fit", "--lanes", "highway"], "--lanes"),
+    (["fit", "--districts", "0"], "--districts"),
+    (["fit", "--overlap", "-1"], "--overlap"),
 ])
 def test_bad_options_fail_fast(recorded, small_localizer, tmp_path, args, message, capsys):
     """Bad options are refused with an error naming them, before any long work."""
