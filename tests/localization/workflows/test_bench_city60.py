@@ -69,7 +69,8 @@ def test_quick_run_end_to_end(tmp_path: Path):
         assert agents["episodes"] == 1 and 0.0 <= agents["success_rate"] <= 1.0
         assert len(saved["records"]["51"]["agents"][source]) == 1
     assert saved["records"]["51"]["agents"]["belief"][0]["steps"] <= 40
-    assert "| 51 | 2000 | 1 |" in table and "<= 0.20" in table
+    assert s["single_image"]["images"] == 20 and s["single_image"]["median"] >= 0
+    assert "| 51 | 2000 | " in table and "<= 0.20" in table and "districts" in table
     assert "60 m" in saved["setup"]
 
 
