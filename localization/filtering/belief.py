@@ -38,7 +38,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from localization._validation import check_choice, check_int, check_real
-from localization.filtering.divergence import DivergenceMonitor
+from localization.filtering.divergence import monitor_for
 from localization.filtering.ekf import (
     OutOfDomainError,
     PoseEKF,
@@ -168,7 +168,7 @@ class BeliefFilter:
         self.last_update: UpdateResult | None = None
         self.misses = 0
         self.gated = 0
-        self.monitor = _monitor(detect_divergence)
+        self.monitor = monitor_for(detect_divergence)
         self.belief_status = "tracking"
         self._confirm = 0
         self._forced = self._lost_now = self._doubtful_now = False
@@ -422,16 +422,3 @@ class BeliefFilter:
             covs.append(self.P)
         return np.array(means), np.array(covs), statuses
 
-
-def _monitor(detect: bool | dict[str, Any]) -> DivergenceMonitor | None:
-    """The monitor for ``detect_divergence``: False -> None, True -> defaults, dict -> its
-    settings."""
-    if isinstance(detect, dict):
-        try:
-            return DivergenceMonitor(**detect)
-        except TypeError as err:
-            raise TypeError(f"detect_divergence: {err}") from None
-    if isinstance(detect, (bool, np.bool_)):
-        return DivergenceMonitor() if detect else None
-    raise TypeError(f"detect_divergence must be a bool or a dict of DivergenceMonitor settings, "
-                    f"got {detect!r}")

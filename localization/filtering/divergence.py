@@ -69,7 +69,7 @@ from localization.filtering.ekf import chi2_band
 from localization.filtering.particle_motion import predict_particles
 from localization.geometry import Array, wrap_angle
 
-__all__ = ["BELIEF_STATUSES", "DivergenceMonitor"]
+__all__ = ["BELIEF_STATUSES", "DivergenceMonitor", "monitor_for"]
 
 #: What a belief says about itself (``info["belief_status"]`` of the wrappers):
 #: "tracking" (consistent), "ambiguous" (several hypotheses, none dominant; particles only),
@@ -228,3 +228,17 @@ class DivergenceMonitor:
         if n < self.window // 2:
             return False
         return float(np.mean(self._nis)) > chi2_band(dim_z, n, self.nis_prob)[1]
+
+
+def monitor_for(detect: bool | dict[str, Any]) -> DivergenceMonitor | None:
+    """The monitor for ``detect_divergence``: False -> None, True -> defaults, dict -> its
+    settings."""
+    if isinstance(detect, dict):
+        try:
+            return DivergenceMonitor(**detect)
+        except TypeError as err:
+            raise TypeError(f"detect_divergence: {err}") from None
+    if isinstance(detect, (bool, np.bool_)):
+        return DivergenceMonitor() if detect else None
+    raise TypeError(f"detect_divergence must be a bool or a dict of DivergenceMonitor settings, "
+                    f"got {detect!r}")

@@ -7,10 +7,15 @@
 On each city of ``cities`` (``city_size`` = 60 m: 9 x 9 blocks, 2000 m^2 of streets, 7.8
 times the default city's) a street-wide localizer is fitted with
 :func:`~localization.workflows.tracking.fit_city_localizer` (``lanes="streets"``, 64 x 64
-perspective, PixelPCA(``n_components``), GSE with ``algorithm="auto"``: its scalable path at
-this size) on :func:`~localization.workflows.tracking.street_train_size` images: ``density``
-images per square metre of street, so the training set grows with the street area. Then:
+perspective, PixelPCA(``n_components``)) on
+:func:`~localization.workflows.tracking.street_train_size` images: ``density`` images per
+square metre of street, so the training set grows with the street area. By default it is a
+:class:`~localization.districts.DistrictLocalizer` of ``districts`` x ``districts`` maps
+sharing ``overlap`` metres (docs/method.md §12.1); ``districts=1`` fits one map of the city
+(GSE's scalable path at this size). Then:
 
+* single images: psi*'s position error on ``n_single`` held-out street-lane images (median,
+  share over 1 m);
 * closed loop: ``n_drives`` random street tours of ``drive_steps`` steps
   (:func:`~localization.workflows.tracking.track_streets`, EKF, "representation" model) on
   the belief mean; position RMSE pooled over the drives against dead reckoning's on the same
@@ -21,15 +26,13 @@ images per square metre of street, so the training set grows with the street are
   same episodes on the true pose (the oracle: what the planner and the episode limit allow),
   truncated at :func:`envs.episode_steps` of the city (1500 steps); success rates.
 
-Cities 51, 52 were never used to choose anything; ``density`` was set on tuning city 53
-(docs/benchmarks.md §10): 24 images a square metre (48000 on a 60 m city, half the default
-city's 12000 / 256 m^2 of the global benchmark) is what keeps a city's fit near 8 minutes
-on the 2 shared cores and the whole run near 20; on city 53 it missed the target by far
-(belief RMSE 31.6 m; psi*'s median error 10.1 m on 1000 held-out lane images, but 0.32 m
-for a localizer of one quadrant at the same density: the one embedding of the whole street
-network folds). The default city's density (47 a square metre, 94000 images) was not
-measured at 60 m. A fit whose neighbour graph falls apart is reported (``fit_failures``) and
-the run goes on.
+Cities 51, 52 were never used to choose anything; ``districts``, ``overlap`` and ``density``
+were set on tuning city 53 (docs/benchmarks.md §10). One map of the city at 24 images a
+square metre (48000) folds: psi*'s median error 10.1 m, belief RMSE 31.6 m. 3 x 3 districts
+of the same images: median 0.22 m (but 22 % of images off by more than 1 m), and one of
+three 1000-step tours lost (0.66 m RMSE). At the default city's density, 47 a square metre
+(94000 images; the nine fits take about 5 minutes): tours of 0.047, 0.122 and 0.083 m. A fit
+whose neighbour graph falls apart is reported (``fit_failures``) and the run goes on.
 """
 
 from __future__ import annotations
@@ -77,7 +80,7 @@ class City60BenchConfig:
     city_size: float = field(default=60.0, metadata={"help": "side of the cities (m)"})
     image_size: int = field(default=64, metadata={"help": "square image side (px)"})
     motion_noise: float = field(default=0.1, metadata={"help": "env actuation noise"})
-    density: float = field(default=24.0, metadata={
+    density: float = field(default=47.0, metadata={
         "help": "street-lane training images per square metre of street (chosen on city 53)"})
     n_components: int = field(default=64, metadata={"help": "PixelPCA components"})
     districts: int = field(default=3, metadata={
