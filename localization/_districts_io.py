@@ -8,13 +8,12 @@ from __future__ import annotations
 
 import io
 import json
-import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from localization._localizer_io import load_localizer, save_localizer
+from localization._localizer_io import load_localizer, read_file, save_localizer
 from localization.localizer import AppearanceLocalizer
 
 FORMAT = "appearance-nav-districts/1"
@@ -41,27 +40,10 @@ def save_districts(loc: Any, path: str | Path) -> None:
     np.savez(path, settings=np.array(json.dumps(settings)), **districts)
 
 
-def read_settings(path: str | Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    """The JSON settings and the arrays of a saved localizer file (either kind);
-    FileNotFoundError if there is none, ValueError naming the file if it is not one."""
-    path = _check_path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no saved localizer file {path}")
-    try:
-        with np.load(path, allow_pickle=False) as f:
-            data = {k: f[k] for k in f.files}
-        settings = json.loads(str(data.pop("settings")))
-    except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile) as err:
-        raise ValueError(f"{path} is not a saved localizer: {err}") from None
-    if not isinstance(settings, dict):
-        raise ValueError(f"{path} is not a saved localizer (settings are not a JSON object)")  # noqa: TRY004
-    return settings, data
-
-
 def load_districts(cls: type, path: str | Path) -> Any:
     """Rebuild a DistrictLocalizer written by :func:`save_districts`; FileNotFoundError if
     there is no such file, ValueError (naming the file) if it is corrupted or incomplete."""
-    settings, data = read_settings(path)
+    _, settings, data = read_file(path, "DistrictLocalizer")
     if settings.get("format") != FORMAT:
         raise ValueError(f"{path}: unknown format {settings.get('format')!r} (want {FORMAT})")
     try:

@@ -60,26 +60,35 @@ def save_localizer(loc: Any, path: str | Path | io.BytesIO) -> None:
                         regressor=np.frombuffer(buf.getvalue(), dtype=np.uint8), **arrays)
 
 
-def load_localizer(cls: type, path: str | Path | io.BytesIO, name: str = "") -> Any:
-    """Rebuild a localizer written by :func:`save_localizer`; ValueError if the file is not
-    one, or is corrupted or incomplete; FileNotFoundError if there is no such file. A buffer
-    (``name`` says what it is in the errors) is read as such."""
+def read_file(path: str | Path | io.BytesIO, what: str = "AppearanceLocalizer",
+              name: str = "") -> tuple[Any, dict[str, Any], dict[str, np.ndarray]]:
+    """(path, JSON settings, arrays) of a saved localizer file of either kind, or of a buffer
+    (``name`` says what it is in the errors); FileNotFoundError if there is no such file,
+    ValueError naming it if it is not a saved localizer (``what``)."""
     if isinstance(path, io.BytesIO):
-        path = _Named(path, name)  # type: ignore[assignment]
+        path = _Named(path, name)
     else:
         path = _check_path(path)
         if not path.is_file():
-            raise FileNotFoundError(f"no saved AppearanceLocalizer file {path}")
+            raise FileNotFoundError(f"no saved {what} file {path}")
     try:
         with np.load(path, allow_pickle=False) as f:
             data = {k: f[k] for k in f.files}
         settings = json.loads(str(data.pop("settings")))
     except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile) as err:
         # unreadable, truncated, not a zip, not JSON (JSONDecodeError is a ValueError), no key
-        raise ValueError(f"{path} is not a saved AppearanceLocalizer: {err}") from None
+        raise ValueError(f"{path} is not a saved {what}: {err}") from None
     if not isinstance(settings, dict):
-        raise ValueError(f"{path} is not a saved AppearanceLocalizer (settings are not a JSON "  # noqa: TRY004  (a bad file is a bad value)
+        raise ValueError(f"{path} is not a saved {what} (settings are not a JSON "  # noqa: TRY004  (a bad file is a bad value)
                          f"object)")
+    return path, settings, data
+
+
+def load_localizer(cls: type, path: str | Path | io.BytesIO, name: str = "") -> Any:
+    """Rebuild a localizer written by :func:`save_localizer`; ValueError if the file is not
+    one, or is corrupted or incomplete; FileNotFoundError if there is no such file. A buffer
+    (``name`` says what it is in the errors) is read as such."""
+    path, settings, data = read_file(path, name=name)
     if settings.get("format") not in (FORMAT, *LEGACY_FORMATS):
         raise ValueError(f"{path}: unknown format {settings.get('format')!r} (want {FORMAT})")
     try:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from localization._districts_io import FORMAT as DISTRICTS_FORMAT
-from localization._districts_io import read_settings
+from localization._localizer_io import read_file
 from localization.districts import DistrictLocalizer
 from localization.localizer import AppearanceLocalizer
 
@@ -23,7 +23,7 @@ def load_localizer(path: str | Path) -> AppearanceLocalizer | DistrictLocalizer:
     ValueError
         If the file is not a saved localizer, is corrupted or incomplete (naming the file).
     """
-    settings, _ = read_settings(path)
+    _, settings, _ = read_file(path, "localizer")
     if settings.get("format") == DISTRICTS_FORMAT:
         return DistrictLocalizer.load(path)
     return AppearanceLocalizer.load(path)
