@@ -252,6 +252,9 @@ class DistrictLocalizer(DistrictNoiseMixin):
                     raise ValueError(f"district {k} ({len(index)} training images): {err}; "
                                      "use fewer districts or more overlap") from err
                 index = index[main]
+            except ValueError as err:  # e.g. too few images in the district
+                raise ValueError(f"district {k} ({len(index)} training images): {err}; use "
+                                 "fewer districts, more overlap or more images") from err
         else:
             raise ValueError(f"district {k}: its neighbourhood graph kept falling apart")
         images, poses = images[index], poses[index]

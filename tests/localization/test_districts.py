@@ -136,6 +136,9 @@ def test_bad_inputs_are_named(split, train):
         DistrictLocalizer(grid=(0, 2)).fit(*train)
     with pytest.raises(ValueError, match="overlap"):
         DistrictLocalizer(overlap=-1.0).fit(*train)
+    with pytest.raises(ValueError, match="district .* training images"):
+        DistrictLocalizer(grid=(12, 12), overlap=0.0, localizer_params=PARAMS).fit(
+            train[0][:300], train[1][:300])
     with pytest.raises(NotFittedError):
         DistrictLocalizer().transform(train[0][:1])
 
