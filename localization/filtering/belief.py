@@ -169,6 +169,10 @@ class BeliefFilter:
         self.misses = 0
         self.gated = 0
         self.monitor = monitor_for(detect_divergence)
+        if self.monitor is not None and callable(getattr(localizer, "local", None)):
+            raise ValueError("detect_divergence is not supported with a localizer of several "
+                             "maps (DistrictLocalizer): on a 60 m city its restarts jumped to "
+                             "look-alike places in other districts (docs/method.md §12.1)")
         self.belief_status = "tracking"
         self._confirm = 0
         self._forced = self._lost_now = self._doubtful_now = False

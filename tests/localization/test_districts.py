@@ -151,6 +151,8 @@ def test_wrapper_runs_the_ekf_and_refuses_particles(split):
     assert np.all(np.isfinite(obs["pose_mean"]))
     with pytest.raises(ValueError, match="particles"):
         BeliefWrapper(make_env(), split, filter="particles")
+    with pytest.raises(ValueError, match="detect_divergence"):
+        BeliefWrapper(make_env(), split, filter_options={"detect_divergence": True})
     env.close()
 
 
