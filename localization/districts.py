@@ -18,6 +18,10 @@ asks every district and keeps the answer that lies in its own district and whose
 closest to that district's feature manifold (the novelty ``|w - g(r*(w))|`` relative to the
 district's median on its training images).
 
+The particle belief weighs each particle by its own district's maps
+(:mod:`localization.filtering.district_particles`); the EKF's divergence detection refuses a
+district localizer (docs/method.md §12.1).
+
 Noise (:meth:`DistrictLocalizer.fit_noise`): Q and the control gains from the drive; R of
 the pose-like models ("pose", "representation": body-frame pose errors, comparable between
 districts) pooled over the drive's frames, each measured by the district of its true pose;
@@ -318,20 +322,30 @@ class DistrictLocalizer(DistrictNoiseMixin):
     # ------------------------------------------------------ belief interface
     def district_of(self, pose: ArrayLike) -> int:
         """Index of the district whose cell holds ``pose`` (the nearest cell outside them)."""
+        return int(self.districts_of(np.asarray(pose, dtype=np.float64).reshape(-1)[:3])[0])
+
+    def districts_of(self, poses: ArrayLike) -> Array:
+        """:meth:`district_of` of many poses (n, 3): indices (n,)."""
         self._check_fitted()
-        xy = np.asarray(pose, dtype=np.float64).reshape(-1)[:2]
+        xy = np.asarray(poses, dtype=np.float64).reshape(-1, 3)[:, :2]
         c = self.cells_
-        dx = np.maximum(np.maximum(c[:, 0] - xy[0], xy[0] - c[:, 2]), 0.0)
-        dy = np.maximum(np.maximum(c[:, 1] - xy[1], xy[1] - c[:, 3]), 0.0)
-        return int(np.argmin(np.hypot(dx, dy)))
+        dx = np.maximum(np.maximum(c[None, :, 0] - xy[:, :1], xy[:, :1] - c[None, :, 2]), 0.0)
+        dy = np.maximum(np.maximum(c[None, :, 1] - xy[:, 1:], xy[:, 1:] - c[None, :, 3]), 0.0)
+        return np.argmin(np.hypot(dx, dy), axis=1)
+
+    @property
+    def views_(self) -> list[District]:
+        """Every district's :class:`District` (its Localizer on its block of w)."""
+        self._check_fitted()
+        return self._views
 
     def local(self, pose: ArrayLike) -> District:
         """The district in charge at ``pose`` (the filter measures with it)."""
         return self._views[self.district_of(pose)]
 
-    def _candidates(self, w: Array) -> list[tuple[float, int, Array]]:
+    def candidates(self, w: Array) -> list[tuple[float, int, Array]]:
         """(relative novelty, district, psi*) of every district whose psi*(w) lies in its own
-        region."""
+        region, least novel first (``w``: the concatenated features)."""
         out = []
         for k, view in enumerate(self._views):
             wk = view.select(w)
@@ -353,14 +367,14 @@ class DistrictLocalizer(DistrictNoiseMixin):
         if measurement != "pose":
             raise ValueError(f"a DistrictLocalizer measures {measurement!r} with the district "
                              "at a pose: use local(pose).measure(w, measurement)")
-        found = self._candidates(self._check_w(w))
+        found = self.candidates(self._check_w(w))
         return found[0][2] if found else np.full(3, np.nan)
 
     def initial_belief(self, w: ArrayLike) -> tuple[Array, Array]:
         """Belief from one image: the chosen district's psi*(w) and initial covariance (the
         mean is NaN when no district's maps hold)."""
         self.check_ready()
-        found = self._candidates(self._check_w(w))
+        found = self.candidates(self._check_w(w))
         if not found:
             return np.full(3, np.nan), np.array(self._poses_cov)
         _, k, x = found[0]

@@ -136,9 +136,10 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         ``env.unwrapped.motion_model`` is F).
     localizer : AppearanceLocalizer or DistrictLocalizer
         Fitted for the same camera and image size, with its noise model
-        (:meth:`~localization.localizer.AppearanceLocalizer.fit_noise`). A
+        (:meth:`~localization.localizer.AppearanceLocalizer.fit_noise`). With a
         :class:`~localization.districts.DistrictLocalizer` (a large city, one map per
-        district) runs with ``filter="ekf"``, which hands over between districts.
+        district) the EKF hands over between districts and the particles are weighed by
+        their own districts' maps.
     measurement : {"pose", "features", "representation"}
         The measurement model of the update (the particles' likelihood).
     keep_image : bool
@@ -208,9 +209,6 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
                 localizer, mm, measurement, gate_probability, relocalize_after,
                 inflate_after=inflate_after, **options)
         else:
-            if isinstance(localizer, DistrictLocalizer):
-                raise ValueError("filter 'particles' needs one map of the whole city; a "
-                                 "DistrictLocalizer runs with filter='ekf'")
             if gate_probability is None:
                 raise ValueError("filter 'particles' needs a gate_probability in (0, 1) "
                                  "(its distances are capped there), got None")
