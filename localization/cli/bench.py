@@ -218,6 +218,8 @@ def _check_city60_bench(c: City60BenchConfig) -> None:
         raise UsageError("city60_city_size", str(err)) from None
     if c.n_drive < 200:  # the noise's correlation time needs 4 blocks of 50 steps
         raise UsageError("city60_n_drive", f"must be >= 200, got {c.n_drive}")
+    if c.filter not in ("ekf", "particles"):
+        raise UsageError("city60_filter", f"must be 'ekf' or 'particles', got {c.filter!r}")
     check_output_dir("city60_out_dir", c.out_dir)
 
 

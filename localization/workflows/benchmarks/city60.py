@@ -88,6 +88,8 @@ class City60BenchConfig:
                 "the whole city"})
     overlap: float = field(default=4.0, metadata={
         "help": "metres of training images shared by neighbouring districts"})
+    filter: str = field(default="ekf", metadata={
+        "help": "the belief of the tours and the agent: 'ekf' or 'particles'"})
     n_drive: int = field(default=1500, metadata={"help": "steps of each noise-calibration drive"})
     n_drives: int = field(default=3, metadata={"help": "street tours per city"})
     drive_steps: int = field(default=1000, metadata={"help": "steps of each street tour"})
@@ -152,7 +154,14 @@ def tours(args: City60BenchConfig, env: gym.Env, loc: Any, base: int) -> list[di
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
         return [track_metrics(track_streets(env, loc, "representation", args.drive_steps,
-                                            seed=base + k)) for k in range(args.n_drives)]
+                                            seed=base + k, **_belief(args)))
+                for k in range(args.n_drives)]
+
+
+def _belief(args: City60BenchConfig) -> dict[str, Any]:
+    """BeliefWrapper options of ``args.filter`` (the particles spread over the city's free
+    streets by default)."""
+    return {} if args.filter == "ekf" else {"filter": "particles"}
 
 
 def agent_runs(args: City60BenchConfig, loc: Any, city: int, base: int
@@ -164,7 +173,8 @@ def agent_runs(args: City60BenchConfig, loc: Any, city: int, base: int
         env = make_pose_env(source, loc if source == "belief" else None, scene_seed=city,
                             city_size=args.city_size, motion_noise=args.motion_noise,
                             image_size=(args.image_size, args.image_size),
-                            max_episode_steps=limit)
+                            max_episode_steps=limit,
+                            **(_belief(args) if source == "belief" else {}))
         with warnings.catch_warnings():
             warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
             episodes = run_episodes(env, ScriptedAgent(env.unwrapped.city),
@@ -241,7 +251,7 @@ def _result(args: City60BenchConfig, records: dict[int, dict[str, Any]],
                      f"{args.image_size}x{args.image_size} perspective, motion noise "
                      f"{args.motion_noise}, PixelPCA({args.n_components}) on {args.density:g} "
                      f"street-lane images per m^2 of street, "
-                     f"{_maps(args)}; {args.n_drives} street tour(s) of "
+                     f"{_maps(args)}, {args.filter} belief; {args.n_drives} street tour(s) of "
                      f"{args.drive_steps} steps and {args.episodes} agent episode(s) "
                      f"(<= {limit} steps) per city"}
 

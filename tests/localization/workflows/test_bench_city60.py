@@ -26,6 +26,7 @@ from localization.workflows.tracking import street_train_size
     ("max_episode_steps", -1, "--city60-max-episode-steps"),
     ("districts", 0, "--city60-districts"),
     ("overlap", -1.0, "--city60-overlap"),
+    ("filter", "ukf", "--city60-filter"),
 ])
 def test_bad_options_are_named(field, value, option):
     args = Args(only="city60", city60=City60BenchConfig(**{field: value}))
@@ -54,8 +55,9 @@ def test_training_size_grows_with_the_street_area():
     env.close()
 
 
-def test_quick_run_end_to_end(tmp_path: Path):
-    run_city60_bench(City60BenchConfig(quick=True, out_dir=str(tmp_path)))
+@pytest.mark.parametrize("belief", ["ekf", "particles"])
+def test_quick_run_end_to_end(tmp_path: Path, belief: str):
+    run_city60_bench(City60BenchConfig(quick=True, out_dir=str(tmp_path), filter=belief))
     saved = json.loads((tmp_path / "bench_city60.json").read_text())
     table = (tmp_path / "bench_city60.md").read_text()
     s = saved["summary"]["51"]
@@ -71,7 +73,7 @@ def test_quick_run_end_to_end(tmp_path: Path):
     assert saved["records"]["51"]["agents"]["belief"][0]["steps"] <= 40
     assert s["single_image"]["images"] == 20 and s["single_image"]["median"] >= 0
     assert "| 51 | 2000 | " in table and "<= 0.20" in table and "districts" in table
-    assert "60 m" in saved["setup"]
+    assert "60 m" in saved["setup"] and f"{belief} belief" in saved["setup"]
 
 
 def test_a_failed_fit_is_reported_and_the_run_goes_on(tmp_path: Path, monkeypatch):
