@@ -4,9 +4,9 @@ With a :class:`~localization.districts.DistrictLocalizer` (duck-typed here: ``vi
 ``districts_of``, ``candidates``) every particle is weighed by the district whose cell holds
 it: the image's measurement by that district's maps at the particle's pose, with the
 pose-equivalent R the districts share ("pose", "representation"), so the distances of
-particles in different districts are on one scale. An image proposes the poses of the
-district chosen as for a start without a pose (psi* in its own region, least novel), psi*
-first, then that district's retrieved training poses.
+particles in different districts are on one scale. An image proposes psi* and the
+retrieved training poses of every district whose psi* lies in its own region: look-alike
+places in several districts all get particles, and the next images decide.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 
 from localization.filtering.image_proposals import ImageProposals
 from localization.filtering.particle_likelihood import ParticleLikelihood
-from localization.geometry import Array
+from localization.geometry import Array, wrap_angle
 
 __all__ = ["DistrictLikelihood", "DistrictProposals", "is_districted"]
 
@@ -69,7 +69,7 @@ class DistrictLikelihood:
 
 
 class DistrictProposals:
-    """:class:`ImageProposals` of the district an image points at (see the module
+    """:class:`ImageProposals` of every district the image may show (see the module
     docstring); ``train_poses`` are all districts' training poses."""
 
     def __init__(self, localizer: Any, n_neighbors: int, noise: Array) -> None:
@@ -77,31 +77,29 @@ class DistrictProposals:
         self.parts = [ImageProposals(v.localizer, n_neighbors, noise) for v in localizer.views_]
         self.train_poses = np.vstack([p.train_poses for p in self.parts])
 
-    def _part(self, w: Array) -> tuple[ImageProposals | None, Array]:
-        found = self.localizer.candidates(w)
-        if not found:
-            return None, w
-        k = found[0][1]
-        return self.parts[k], self.localizer.views_[k].select(w)
+    def _shown(self, w: Array) -> list[tuple[ImageProposals, Array]]:
+        """(proposals, block of w) of the districts whose psi*(w) lies in their own region
+        (every district when none does)."""
+        views = self.localizer.views_
+        ks = [k for _, k, _ in self.localizer.candidates(w)] or range(len(views))
+        return [(self.parts[k], views[k].select(w)) for k in ks]
 
     def __call__(self, w: Array) -> Array:
-        """psi* of the chosen district and its retrieved training poses (k, 3); every
-        district's retrieval when no district's psi* lies in its region."""
-        part, wk = self._part(w)
-        if part is not None:
-            return part(wk)
-        return np.vstack([p.neighbours(v.select(w))
-                          for p, v in zip(self.parts, self.localizer.views_)])
+        """psi* and the retrieved training poses (k, 3) of each district the image may show:
+        look-alike places in several districts all get particles, and the next images
+        decide."""
+        return np.vstack([part(wk) for part, wk in self._shown(w)])
 
     def neighbours(self, w: Array) -> Array:
-        part, wk = self._part(w)
-        if part is None:
-            return np.zeros((0, 3))
-        return part.neighbours(wk)
+        """The retrieved training poses of each district the image may show."""
+        return np.vstack([part.neighbours(wk) for part, wk in self._shown(w)])
 
     def agreement(self, w: Array, pose: Array, radius: float, heading_scale: float) -> float:
-        part, wk = self._part(w)
-        return 0.0 if part is None else part.agreement(wk, pose, radius, heading_scale)
+        """Share of :meth:`neighbours` within ``radius`` of ``pose`` (as
+        :meth:`ImageProposals.agreement`): low while several districts look alike."""
+        d = self.neighbours(w) - pose
+        d2 = d[:, 0] ** 2 + d[:, 1] ** 2 + (heading_scale * wrap_angle(d[:, 2])) ** 2
+        return float(np.mean(d2 < radius ** 2))
 
     def jitter(self, centres: Array, n: int, rng: np.random.Generator) -> Array:
         return self.parts[0].jitter(centres, n, rng)
