@@ -19,12 +19,33 @@ from localization.filtering.image_proposals import ImageProposals
 from localization.filtering.particle_likelihood import ParticleLikelihood
 from localization.geometry import Array, wrap_angle
 
-__all__ = ["DistrictLikelihood", "DistrictProposals", "is_districted"]
+__all__ = ["DistrictLikelihood", "DistrictProposals", "check_measurement_noise", "image_models",
+           "is_districted"]
 
 
 def is_districted(localizer: Any) -> bool:
     """True for a localizer of several maps (one with ``local(pose)``)."""
     return callable(getattr(localizer, "local", None))
+
+
+def check_measurement_noise(localizer: Any, measurement: str) -> None:
+    """NotFittedError unless the localizer (one map, or a district of several) has the
+    named model's R."""
+    one = localizer.local(localizer.prior()[0]) if is_districted(localizer) else localizer
+    one.measurement_model(measurement)
+
+
+def image_models(localizer: Any, measurement: str, alpha: Array, gate_probability: float,
+                 n_neighbors: int, proposal_noise: Array) -> tuple[Any, Any, int]:
+    """The particle belief's likelihood, image proposals and feature width for a localizer
+    of one map (:class:`ParticleLikelihood`, :class:`ImageProposals`) or of several."""
+    if is_districted(localizer):
+        return (DistrictLikelihood(localizer, measurement, alpha, gate_probability),
+                DistrictProposals(localizer, n_neighbors, proposal_noise),
+                len(localizer.views_) * localizer.n_features_)
+    return (ParticleLikelihood(localizer, measurement, alpha, gate_probability),
+            ImageProposals(localizer, n_neighbors, proposal_noise),
+            len(localizer.regressor_.w_mean_))
 
 
 class DistrictLikelihood:
@@ -76,13 +97,17 @@ class DistrictProposals:
         self.localizer, self.noise = localizer, noise
         self.parts = [ImageProposals(v.localizer, n_neighbors, noise) for v in localizer.views_]
         self.train_poses = np.vstack([p.train_poses for p in self.parts])
+        self._last: tuple[bytes, list[int]] | None = None  # the last image's districts
 
     def _shown(self, w: Array) -> list[tuple[ImageProposals, Array]]:
         """(proposals, block of w) of the districts whose psi*(w) lies in their own region
-        (every district when none does)."""
-        views = self.localizer.views_
-        ks = [k for _, k, _ in self.localizer.candidates(w)] or range(len(views))
-        return [(self.parts[k], views[k].select(w)) for k in ks]
+        (every district when none does). A step asks for the same image's districts more
+        than once (injection, confirmation): they are kept for the last image."""
+        views, key = self.localizer.views_, np.asarray(w, dtype=np.float64).tobytes()
+        if self._last is None or self._last[0] != key:
+            ks = [k for _, k, _ in self.localizer.candidates(w)] or list(range(len(views)))
+            self._last = (key, ks)
+        return [(self.parts[k], views[k].select(w)) for k in self._last[1]]
 
     def __call__(self, w: Array) -> Array:
         """psi* and the retrieved training poses (k, 3) of each district the image may show:

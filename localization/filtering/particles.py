@@ -37,16 +37,11 @@ from sklearn.exceptions import NotFittedError
 from localization._validation import check_int, check_real
 from localization.filtering._modes import Mode, find_modes
 from localization.filtering.augmented_mcl import LikelihoodAverages
-from localization.filtering.district_particles import (
-    DistrictLikelihood,
-    DistrictProposals,
-    is_districted,
-)
-from localization.filtering.image_proposals import ImageProposals
+from localization.filtering.district_particles import check_measurement_noise, image_models
 from localization.filtering.measurement_noise import inflate
 from localization.filtering.mode_confirmation import ModeConfirmation
 from localization.filtering.mode_tracker import make_tracker
-from localization.filtering.particle_likelihood import MEASUREMENTS, ParticleLikelihood
+from localization.filtering.particle_likelihood import MEASUREMENTS
 from localization.filtering.particle_motion import (
     is_unicycle,
     predict_particles,
@@ -156,9 +151,7 @@ class ParticleBelief:
         if getattr(localizer, "process_noise_body_", None) is None:
             raise NotFittedError("the localizer has no process noise: call fit_noise() or "
                                  "fit_process_noise() first")
-        districted = is_districted(localizer)
-        model_of = localizer.local(localizer.prior()[0]) if districted else localizer
-        model_of.measurement_model(measurement)  # raises NotFittedError without R
+        check_measurement_noise(localizer, measurement)
         self.localizer, self.motion_model, self.measurement = localizer, motion_model, measurement
         self.n_particles = int(n_particles)
         unit, unit_open = {"low": 0.0, "high": 1.0}, {"low": 0.0, "high": 1.0, "low_open": True}
@@ -183,17 +176,14 @@ class ParticleBelief:
         self.Q = inflate(localizer.process_noise_body_, self.alpha)
         self.gain = np.asarray(localizer.control_gain_, dtype=np.float64)
         self._unicycle = is_unicycle(motion_model)
-        self._m = (len(localizer.views_) * localizer.n_features_ if districted
-                   else len(localizer.regressor_.w_mean_))
-        self.likelihood = (DistrictLikelihood if districted else ParticleLikelihood)(
-            localizer, measurement, self.alpha, gate_probability)
-        self.R, self.gate = self.likelihood.R, self.likelihood.gate
         self.proposal_noise = np.asarray(localizer.noise_["representation"] if proposal_noise
                                          is None else proposal_noise, dtype=np.float64)
         if self.proposal_noise.shape != (3, 3):
             raise ValueError(f"proposal_noise must be (3, 3), got {self.proposal_noise.shape}")
-        self._proposals = (DistrictProposals if districted else ImageProposals)(
-            localizer, n_neighbors, self.proposal_noise)
+        self.likelihood, self._proposals, self._m = image_models(
+            localizer, measurement, self.alpha, gate_probability, n_neighbors,
+            self.proposal_noise)
+        self.R, self.gate = self.likelihood.R, self.likelihood.gate
         self.rng = np.random.default_rng(seed)
         self.tracker = make_tracker(track_mode, localizer, motion_model, measurement,
                                     alpha=self.alpha, radius=self.mode_radius,
