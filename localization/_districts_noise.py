@@ -50,9 +50,8 @@ class DistrictNoiseMixin:
         first = self.districts_[0].fit_process_noise(motion_model, poses, controls)
         self.control_gain_ = np.array(first.control_gain_)
         self.process_noise_body_ = np.array(first.process_noise_body_)
-        for d, view in zip(self.districts_, self._views):
+        for d in self.districts_:
             d.control_gain_, d.process_noise_body_ = self.control_gain_, self.process_noise_body_
-            view.control_gain_ = self.control_gain_
         W = self.transform(images)
         pooled = self._pooled_residuals(W, poses)
         thin = []

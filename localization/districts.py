@@ -76,7 +76,11 @@ class District:
         self.localizer: AppearanceLocalizer = parent.districts_[index]
         m = parent.n_features_
         self._block = slice(index * m, (index + 1) * m)
-        self.control_gain_ = parent.control_gain_
+
+    @property
+    def control_gain_(self) -> Array:
+        """The parent's calibrated control gains (shared by the districts)."""
+        return self.parent.control_gain_
 
     def select(self, w: ArrayLike) -> Array:
         """This district's features (m,) out of the concatenated w (K m,)."""
