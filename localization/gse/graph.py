@@ -77,6 +77,10 @@ class DisconnectedGraphError(ValueError):
         super().__init__(message)
         self.labels = labels
 
+    def __reduce__(self) -> tuple[type, tuple[str, NDArray[np.intp]]]:
+        # picklable with its labels: it crosses process boundaries from a fit in a worker
+        return type(self), (str(self), self.labels)
+
 
 def check_connected(n: int, ei: NDArray[np.intp], ej: NDArray[np.intp], what: str) -> int:
     """Number of connected components; :class:`DisconnectedGraphError` (a ValueError) if
