@@ -52,6 +52,7 @@ def save_localizer(loc: Any, path: str | Path | io.BytesIO) -> None:
     for name, model in getattr(loc, "noise_scale_", {}).items():
         arrays |= {f"{_SCALE}/{name}/{k}": v for k, v in model.get_state().items()}
     arrays["control_gain"] = loc.control_gain_
+    arrays["dropped"] = np.asarray(getattr(loc, "dropped_", np.zeros(0, np.intp)), np.int64)
     if getattr(loc, "initial_noise_", None) is not None:
         arrays["initial_noise"] = loc.initial_noise_
     if loc.process_noise_body_ is not None:
@@ -108,6 +109,7 @@ def load_localizer(cls: type, path: str | Path | io.BytesIO, name: str = "") -> 
         loc.control_gain_ = np.asarray(data["control_gain"], dtype=np.float64)
         loc.process_noise_body_ = data.get("process_noise_body")
         loc.initial_noise_ = data.get("initial_noise")
+        loc.dropped_ = np.asarray(data.get("dropped", np.zeros(0)), dtype=np.intp)
         loc.city_ = check_city_info(settings.get("city"), "the file's city")
         loc.fingerprint_ = settings.get("fingerprint")
         if loc.fingerprint_ is not None and not isinstance(loc.fingerprint_, str):

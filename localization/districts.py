@@ -51,8 +51,6 @@ __all__ = ["District", "DistrictLocalizer", "district_cells"]
 
 _NOVELTY_SAMPLE = 500  # training images per district for its median novelty
 _RESIDUAL_SAMPLE = 3000  # training images per district for its provisional noise
-_DROP_SHARE = 0.02  # at most this share of a district's images may be dropped as cut off
-_REFITS = 3
 
 
 def district_cells(poses: ArrayLike, grid: tuple[int, int]) -> Array:
@@ -139,7 +137,7 @@ class DistrictLocalizer(DistrictNoiseMixin):
     train_index_ : list of ndarray
         The training images (indices) each district was fitted on: those within ``overlap``
         of its cell, less a few views cut off from the rest of its neighbourhood graph (at
-        most 2 %).
+        most the localizer's ``max_dropped``, 2 % by default).
     n_train_ : ndarray (K,)
         Training images per district.
     novelty_scale_ : ndarray (K,)
@@ -246,25 +244,19 @@ class DistrictLocalizer(DistrictNoiseMixin):
                       city: dict[str, Any] | None, params: dict[str, Any]
                       ) -> tuple[AppearanceLocalizer, Array]:
         """District k's localizer on the training images ``index``, and the indices it kept:
-        a few views whose neighbourhood graph is cut off from the rest (at most
-        ``_DROP_SHARE``) are dropped. Without a K-fold noise model it gets a provisional one
+        a few views whose neighbourhood graph is cut off from the rest (at most the
+        localizer's ``max_dropped``) are dropped. Without a K-fold noise model it gets a provisional one
         from its training residuals."""
-        for _ in range(_REFITS):
-            try:
-                loc = AppearanceLocalizer(**params).fit(images[index], poses[index],
-                                                        camera=camera, city=city)
-                break
-            except DisconnectedGraphError as err:
-                main = err.labels == np.argmax(np.bincount(err.labels))
-                if main.mean() < 1.0 - _DROP_SHARE:
-                    raise ValueError(f"district {k} ({len(index)} training images): {err}; "
-                                     "use fewer districts or more overlap") from err
-                index = index[main]
-            except ValueError as err:  # e.g. too few images in the district
-                raise ValueError(f"district {k} ({len(index)} training images): {err}; use "
-                                 "fewer districts, more overlap or more images") from err
-        else:
-            raise ValueError(f"district {k}: its neighbourhood graph kept falling apart")
+        try:
+            loc = AppearanceLocalizer(**params).fit(
+                images[index], poses[index], camera=camera, city=city)
+        except DisconnectedGraphError as err:
+            raise ValueError(f"district {k} ({len(index)} training images): {err}; use fewer "
+                             "districts or more overlap") from err
+        except ValueError as err:  # e.g. too few images in the district
+            raise ValueError(f"district {k} ({len(index)} training images): {err}; use "
+                             "fewer districts, more overlap or more images") from err
+        index = np.delete(index, loc.dropped_)
         images, poses = images[index], poses[index]
         if set(loc.noise_) != set(MEASUREMENTS):
             sub = np.random.default_rng(k).permutation(len(poses))[:_RESIDUAL_SAMPLE]

@@ -64,6 +64,7 @@ from localization._validation import (
 )
 from localization.features import make_features
 from localization.geometry import Array, wrap_angle
+from localization.gse.graph import fit_main_component
 from localization.gse.regressor import GSERegressor
 
 _YAW_BINS = 72
@@ -115,6 +116,11 @@ class AppearanceLocalizer(NoiseModelMixin, BeliefInterfaceMixin, MapMixin):
         of the training poses.
     random_state : int
         Seed of the fold split and the robust covariance.
+    max_dropped : float in [0, 1)
+        Largest share of the training images that may be dropped because GSE's
+        neighbourhood graph cuts them off from the rest (a few views of a dead end or a
+        corner; a RuntimeWarning says how many); a larger split raises
+        :class:`~localization.gse.graph.DisconnectedGraphError`. 0: any split raises.
 
     Attributes
     ----------
@@ -143,6 +149,8 @@ class AppearanceLocalizer(NoiseModelMixin, BeliefInterfaceMixin, MapMixin):
     city_ : dict or None
         The city of the training images (``city_info(env)``; None: unknown, e.g. recorded
         data); :meth:`check_city` refuses another one.
+    dropped_ : ndarray of shape (n_dropped,)
+        Indices of the training images left out of the GSE maps (``max_dropped``).
     fingerprint_ : str
         SHA-256 of a fixed subsample of the training images (:func:`images_fingerprint`).
     quality_ : dict of str -> float
@@ -153,7 +161,7 @@ class AppearanceLocalizer(NoiseModelMixin, BeliefInterfaceMixin, MapMixin):
     def __init__(self, features: str = "pixel_pca", features_params: dict | None = None,
                  rows: tuple[float, float] = (0.0, 0.55), regressor_params: dict | None = None,
                  noise_folds: int = 3, yaw_cut: str | float = "auto",
-                 random_state: int = 0) -> None:
+                 random_state: int = 0, max_dropped: float = 0.02) -> None:
         self.features = features
         self.features_params = features_params
         self.rows = rows
@@ -161,6 +169,7 @@ class AppearanceLocalizer(NoiseModelMixin, BeliefInterfaceMixin, MapMixin):
         self.noise_folds = noise_folds
         self.yaw_cut = yaw_cut
         self.random_state = random_state
+        self.max_dropped = max_dropped
 
     # ------------------------------------------------------------------ fit
     def fit(self, images: ArrayLike, poses: ArrayLike, *, camera: str | None = None,
@@ -200,7 +209,12 @@ class AppearanceLocalizer(NoiseModelMixin, BeliefInterfaceMixin, MapMixin):
         self.image_size_ = (int(images.shape[1]), int(images.shape[2]))
         self.features_ = make_features(self.features, **(self.features_params or {}))
         W = self.features_.fit_transform(self._crop(images), poses)  # only small_cnn uses poses
-        self.regressor_ = self._new_regressor().fit(W, self._to_model(poses))
+        Y = self._to_model(poses)
+        self.regressor_, kept = fit_main_component(
+            lambda i: self._new_regressor().fit(W[i], Y[i]), len(W), self.max_dropped,
+            "the training images")
+        self.dropped_ = np.setdiff1d(np.arange(len(W)), kept)
+        W, poses = W[kept], poses[kept]
         self.noise_: dict[str, Array] = {}
         self.correlation_time_: dict[str, Array] = {}
         self.residual_rms_: dict[str, Array] = {}
@@ -262,6 +276,7 @@ class AppearanceLocalizer(NoiseModelMixin, BeliefInterfaceMixin, MapMixin):
         else:
             check_real(self.yaw_cut, "yaw_cut")
         check_seed(self.random_state, "random_state")
+        check_real(self.max_dropped, "max_dropped", low=0.0, high=1.0, high_open=True)
 
     def _row_slice(self, height: int) -> slice:
         a, b = (float(r) for r in self.rows)

@@ -9,6 +9,8 @@ here forms an n x n or nq x nq dense matrix.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,6 +22,8 @@ from sklearn.neighbors import NearestNeighbors
 from localization.geometry import Array
 
 _CHUNK = 1024  # rows per batch in chunked computations (bounds memory)
+_REFITS = 3  # fits of fit_main_component before it gives up
+T = TypeVar("T")
 
 
 def polar(M: Array) -> Array:
@@ -94,6 +98,41 @@ def check_connected(n: int, ei: NDArray[np.intp], ej: NDArray[np.intp], what: st
             f"{sorted(sizes.tolist(), reverse=True)[:10]}): GSE would place them arbitrarily. "
             "Increase n_neighbors (or bandwidth), or fit one model per component.", labels)
     return int(n_comp)
+
+
+def fit_main_component(fit: Callable[[NDArray[np.intp]], T], n: int, max_dropped: float,
+                       what: str = "the training samples") -> tuple[T, NDArray[np.intp]]:
+    """``fit(index)`` on the samples ``index`` of ``n``; where their neighbourhood graph falls
+    apart (:class:`DisconnectedGraphError`), again on the largest component alone, as long as
+    at most ``max_dropped`` of the ``n`` samples are dropped (a RuntimeWarning says how many).
+
+    Returns
+    -------
+    fitted : what ``fit`` returned
+    kept : ndarray of shape (n_kept,) — the indices it was fitted on, ascending
+
+    Raises
+    ------
+    DisconnectedGraphError
+        If keeping the largest component would drop more than ``max_dropped`` (message and
+        labels of the last fit), or the graph still falls apart after a few refits.
+    """
+    index = np.arange(n)
+    for attempt in range(_REFITS):
+        try:
+            fitted = fit(index)
+        except DisconnectedGraphError as err:
+            main = err.labels == np.argmax(np.bincount(err.labels))
+            if attempt == _REFITS - 1 or n - main.sum() > max_dropped * n:
+                raise
+            index = index[main]
+            continue
+        if len(index) < n:
+            warnings.warn(f"{n - len(index)} of {n} samples of {what} were cut off from the "
+                          "rest of GSE's neighbourhood graph and were dropped", RuntimeWarning,
+                          stacklevel=3)
+        return fitted, index
+    raise AssertionError("unreachable")  # the last attempt returns or raises
 
 
 def local_pca(Z: Array, centers: Array, nbr: Array, weights: Array, q: int) -> Array:

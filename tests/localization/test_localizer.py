@@ -81,6 +81,7 @@ def test_save_load_round_trip(localizer, lane_data, tmp_path):
         assert np.array_equal(localizer.noise_[name], again.noise_[name])
     assert np.array_equal(localizer.process_noise_body_, again.process_noise_body_)
     assert again.camera_ == "perspective" and again.image_size_ == (32, 32)
+    np.testing.assert_array_equal(again.dropped_, localizer.dropped_)
     x = lane_data[1][5]
     assert np.allclose(localizer.measurement_model("representation").h(x),
                        again.measurement_model("representation").h(x))
@@ -125,6 +126,8 @@ def test_clear_errors(localizer, lane_data):
         AppearanceLocalizer(rows=(0.6, 0.2)).fit(images, poses)
     with pytest.raises(ValueError, match="noise_folds"):
         AppearanceLocalizer(noise_folds=1).fit(images, poses)
+    with pytest.raises(ValueError, match="max_dropped"):
+        AppearanceLocalizer(max_dropped=1.0).fit(images, poses)
     with pytest.raises(ValueError, match="poses"):
         AppearanceLocalizer().fit(images, poses[:-1])
     with pytest.raises(ValueError, match="NaN"):

@@ -400,3 +400,22 @@ def test_load_reads_format_1_files(planar, tmp_path):
     old = GSERegressor.load(tmp_path / "old.npz")
     assert old.loop_angle_ is None
     assert np.array_equal(old.predict(Wt), model.predict(Wt))
+
+
+def test_fit_main_component_drops_a_small_cut_off_cluster_and_only_that():
+    from localization.gse.graph import DisconnectedGraphError, fit_main_component
+
+    Z, Y, _ = regression_manifold(300, seed=0)
+    far, far_y, _ = regression_manifold(15, seed=1)
+    Z2, Y2 = np.vstack([Z, far + 1e3]), np.vstack([Y, far_y])  # 15 of 315 (4.8 %) cut off
+
+    def fit(i):
+        return GSERegressor(n_neighbors=10).fit(Z2[i], Y2[i])
+
+    with pytest.warns(RuntimeWarning, match="15 of 315"):
+        reg, kept = fit_main_component(fit, len(Z2), 0.05)
+    np.testing.assert_array_equal(kept, np.arange(300))
+    np.testing.assert_allclose(reg.predict(Z[:20]), GSERegressor(n_neighbors=10).fit(Z, Y)
+                               .predict(Z[:20]))
+    with pytest.raises(DisconnectedGraphError, match="2 connected components"):
+        fit_main_component(fit, len(Z2), 0.04)  # 4.8 % would go: more than allowed
