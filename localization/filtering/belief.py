@@ -16,6 +16,9 @@ accepted again. Only the heading: inflating the position too let a burst of alia
 measurements through (one moved a belief 2.5 m sideways). An isolated outlier (e.g. a
 corrupted image) changes nothing. After ``relocalize_after`` steps in a row without an
 accepted measurement the belief restarts from psi* of the current image, as at the start.
+Five steps without one make it "doubtful" while P is narrow (coasting on F through views
+off the maps, e.g. a turn at a corner on a lane-trained map) and "lost" once P is too wide
+to steer on.
 
 Divergence detection (``detect_divergence``, :mod:`localization.filtering.divergence`; off
 by default): one contradicting image or the window's chi-square
@@ -90,7 +93,11 @@ NOISE_MODELS = ("global", "heteroscedastic")
 RESET_MODES = ("image", "global")
 CONFIRM_STEPS = 3  # accepted measurements after a restart before the status is "tracking"
 TRIAL_STEPS = 5  # a divergence restart must have CONFIRM_STEPS accepted within these, or undo
-LOST_AFTER_MISSES = 5  # steps in a row without an accepted measurement: "lost"
+LOST_AFTER_MISSES = 5  # steps in a row without an accepted measurement: "doubtful" or "lost"
+#: ... "lost" when P is also this wide (position std in m along its widest axis, heading std in
+#: rad); else "doubtful": dead reckoning through unfamiliar views at a corner is not being lost
+LOST_POSITION_STD = 0.5
+LOST_HEADING_STD = 0.4
 MAX_HEADING_STD = 0.5  # rad: heading inflation stops there
 
 
@@ -374,9 +381,12 @@ class BeliefFilter:
 
     def _update_status(self, status: str) -> None:
         """"relocalizing" until ``CONFIRM_STEPS`` accepted measurements; otherwise "lost"
-        while the monitor says so or after ``LOST_AFTER_MISSES`` steps in a row without an
-        accepted measurement, "doubtful" on a step whose image alone contradicts the belief
-        (the monitor's ``doubt_nis``), else "tracking"."""
+        while the monitor says so, or after ``LOST_AFTER_MISSES`` steps in a row without an
+        accepted measurement once P is wider than ``LOST_POSITION_STD`` /
+        ``LOST_HEADING_STD`` (heading inflation gets there after a few rejected images);
+        "doubtful" after those misses while P is still narrow (coasting on F through views
+        off the maps) or on a step whose image alone contradicts the belief (the monitor's
+        ``doubt_nis``); else "tracking"."""
         if status == "relocalized":
             return
         if status == "reverted":
@@ -387,9 +397,17 @@ class BeliefFilter:
             if self._confirm >= CONFIRM_STEPS:
                 self.belief_status = "tracking"
             return
-        lost = self._lost_now or self.misses >= LOST_AFTER_MISSES
-        self.belief_status = "lost" if lost else "doubtful" if self._doubtful_now \
-            else "tracking"
+        missing = self.misses >= LOST_AFTER_MISSES
+        lost = self._lost_now or (missing and self._wide())
+        self.belief_status = "lost" if lost else "doubtful" if (
+            self._doubtful_now or missing) else "tracking"
+
+    def _wide(self) -> bool:
+        """P too wide to steer on (:data:`LOST_POSITION_STD`, :data:`LOST_HEADING_STD`)."""
+        assert self.ekf is not None
+        P = self.ekf.P
+        return bool(np.linalg.eigvalsh(P[:2, :2])[-1] > LOST_POSITION_STD ** 2
+                    or P[2, 2] > LOST_HEADING_STD ** 2)
 
     def _update(self, w: Array) -> tuple[float, str]:
         assert self.ekf is not None

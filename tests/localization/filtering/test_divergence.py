@@ -126,3 +126,30 @@ def test_a_restart_the_images_confirm_stands(localizer, drive):
     f, statuses, truth = _tracking_then_trial(localizer, drive, incumbent_error=3.0)
     assert "reverted" not in statuses and f._trial is None, statuses
     assert np.hypot(*(f.x[:2] - truth[:2])) < 0.5
+
+
+def test_misses_are_doubt_while_p_is_narrow_and_lost_once_it_is_wide(localizer, drive):
+    """Images off the maps tell nothing: coasting on F the EKF is "doubtful" (the agent
+    slows down), not "lost" (the agent would stop and turn to views the maps do not know);
+    rejected images widen the heading until it is too uncertain to steer on: "lost"."""
+    from localization.filtering.belief import (
+        LOST_AFTER_MISSES,
+        LOST_HEADING_STD,
+        BeliefFilter,
+    )
+    from tests.localization.conftest import make_env
+
+    images, poses, controls = drive
+    W = localizer.transform(images)
+    env = make_env()
+    f = BeliefFilter(localizer, env.unwrapped.motion_model)
+    env.close()
+    f.reset(W[0], poses[0], P)
+    off_map = W[0] + 100.0 * W.std(axis=0)  # features far from every training image
+    for t in range(1, 2 * LOST_AFTER_MISSES):
+        assert f.step(controls[t - 1], off_map)[1] == "out_of_domain"
+    assert f.misses > LOST_AFTER_MISSES and f.belief_status == "doubtful"
+    assert np.sqrt(f.ekf.P[2, 2]) < LOST_HEADING_STD
+    statuses = [f.step(controls[t - 1], W[t + 120])[1] for t in range(2 * LOST_AFTER_MISSES, 40)]
+    assert statuses.count("gated") >= 0.9 * len(statuses), statuses  # images 12 m on
+    assert f.belief_status == "lost" and np.sqrt(f.ekf.P[2, 2]) > LOST_HEADING_STD
