@@ -8,13 +8,19 @@ from pathlib import Path
 
 import pytest
 
+from agents.evaluation import Episode
 from localization.workflows.benchmarks.robustness import (
     RobustnessConfig,
+    _summary,
     run_robustness_bench,
     runs_condition,
     training_of,
 )
-from localization.workflows.benchmarks.robustness_report import targets
+from localization.workflows.benchmarks.robustness_report import (
+    DEFAULT_STEPS,
+    _success_cell,
+    targets,
+)
 
 
 def test_image_free_sources_skip_lighting_presets_only() -> None:
@@ -22,6 +28,20 @@ def test_image_free_sources_skip_lighting_presets_only() -> None:
     assert not runs_condition("oracle", "night") and not runs_condition("dead_reckoning", "dusk")
     assert runs_condition("oracle", "traffic") and runs_condition("dead_reckoning", "kidnap")
     assert training_of("kidnap") == "daylight" and training_of("traffic") == "randomised"
+
+
+def test_success_within_the_default_limit_counts_only_the_early_arrivals() -> None:
+    def episode(success: bool, steps: int) -> Episode:
+        return Episode(seed=0, success=success, steps=steps, time=steps / 10, path_length=9.0,
+                       shortest=8.0, collision_steps=0, final_distance=0.3, belief_rmse=0.1)
+
+    runs = [episode(True, 100), episode(True, DEFAULT_STEPS), episode(True, DEFAULT_STEPS + 1),
+            episode(False, 600)]
+    row = _summary(runs)
+    assert row["success_rate"] == 0.75 and row["success_within_default"] == 0.5
+    assert row["success_within_default_se"] == pytest.approx((0.25 / 4) ** 0.5)
+    assert _success_cell(row, 600) == f"0.75 ± 0.22 (0.50 in {DEFAULT_STEPS})"
+    assert _success_cell(row, DEFAULT_STEPS) == "0.75 ± 0.22"
 
 
 @pytest.mark.parametrize("key, value, match", [
