@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from agents.planner import PlannedPath, StreetPlanner, check_city_point, round_corners
 from envs.driving import bearing, pursuit_turn_rate
-from localization._validation import check_array, check_real
+from localization._validation import check_array, check_int, check_real
 from localization.geometry import Array
 
 __all__ = ["BELIEF_KEYS", "PLANS", "SLOW_STATUSES", "STOP_STATUSES", "Navigator", "ScriptedAgent",
@@ -143,6 +143,8 @@ class ScriptedAgent:
     replan_distance : float — see :class:`Navigator`.
     plan : {"drive", "shortest"} — car-like lane plans, or the shortest street path with
         turns on the spot (:class:`Navigator`).
+    back_off_steps : int — steps it reverses after a contact (0: never).
+    back_off_speed : float — reversing speed (m/s).
 
     Notes
     -----
@@ -152,14 +154,24 @@ class ScriptedAgent:
     agent does not steer on the belief: it stops and turns in place at ``look_rate`` to show
     the camera new views; "relocalizing" or "ambiguous" scale the speed by ``slow_factor``.
     The status comes through ``info``, not the observation, so every pose source keeps the
-    same observation space (and trained policies keep working). Call :meth:`reset` between
-    episodes (a new goal also starts a new plan).
+    same observation space (and trained policies keep working). So does its bumper:
+    ``info["collision"]`` (contact with a building, the boundary or a vehicle, what a
+    robot's bump sensor reports) makes it reverse ``back_off_steps`` steps at
+    ``back_off_speed`` before it steers again: a plan on a wrong belief led into the wall,
+    and pressing on only adds contact (on tuning cities 13-14 backing off 5 steps cut the
+    contact steps per episode on the EKF belief from 2.6 to 0.46 nominal and 15.9 to 2.2
+    kidnapped, success unchanged). Call :meth:`reset` between episodes (a new goal also
+    starts a new plan).
     """
 
     def __init__(self, city: Any, lookahead: float = 0.6, speed: float = 0.9, w_max: float = 1.0,
                  turn_in_place: float = 0.6, replan_distance: float = 1.0,
-                 look_rate: float = 0.5, slow_factor: float = 0.5, plan: str = "drive") -> None:
+                 look_rate: float = 0.5, slow_factor: float = 0.5, plan: str = "drive",
+                 back_off_steps: int = 5, back_off_speed: float = 0.3) -> None:
         self.navigator = Navigator(city, replan_distance, plan)
+        self.back_off_steps = check_int(back_off_steps, "back_off_steps", low=0)
+        self.back_off_speed = check_real(back_off_speed, "back_off_speed", low=0.0, high=1.0)
+        self._backing = 0  # steps of reversing left
         self.look_rate = check_real(look_rate, "look_rate", low=0.0)
         self.slow_factor = check_real(slow_factor, "slow_factor", low=0.0, high=1.0)
         self.lookahead, self.speed, self.w_max, self.turn_in_place = (
@@ -168,8 +180,9 @@ class ScriptedAgent:
                 ("turn_in_place", turn_in_place)))
 
     def reset(self) -> None:
-        """Forget the current plan."""
+        """Forget the current plan (and stop reversing)."""
         self.navigator.reset()
+        self._backing = 0
 
     @property
     def path(self) -> Array | None:
@@ -182,6 +195,11 @@ class ScriptedAgent:
         """The action U = [v, w] for one belief observation (and the step's ``info``)."""
         mean, _, goal = check_belief_observation(obs)
         status = None if info is None else info.get("belief_status")
+        if info is not None and info.get("collision", False):
+            self._backing = self.back_off_steps
+        if self._backing > 0:
+            self._backing -= 1
+            return np.array([-self.back_off_speed, 0.0], dtype=np.float32)
         if status in STOP_STATUSES:
             return np.array([0.0, min(self.look_rate, self.w_max)], dtype=np.float32)
         path = self.navigator.update(mean, goal, OBS_NAMES)

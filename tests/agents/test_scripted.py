@@ -103,6 +103,24 @@ def test_body_frame_and_navigation_features():
     np.testing.assert_allclose(out["uncertainty"], [0.2, 0.3, 0.1], atol=1e-6)
 
 
+def test_agent_backs_off_after_a_contact_then_steers_again() -> None:
+    env = gym.make("AppearanceNav-v0", scene_seed=0)
+    agent = ScriptedAgent(env.unwrapped.city, back_off_steps=3, back_off_speed=0.2)
+    obs, info = env.reset(seed=3)
+    env.close()
+    belief = _belief(info["pose"], obs["goal"])
+    steer = agent.act(belief, {"collision": False})
+    backing = [agent.act(belief, {"collision": k == 0}) for k in range(4)]
+    for u in backing[:3]:
+        np.testing.assert_array_equal(u, np.array([-0.2, 0.0], np.float32))
+    np.testing.assert_array_equal(backing[3], steer)  # three steps, then the plan again
+    agent.act(belief, {"collision": True})
+    agent.reset()  # a new episode does not inherit the reversing
+    np.testing.assert_array_equal(agent.act(belief), steer)
+    with pytest.raises(ValueError, match="back_off_steps"):
+        ScriptedAgent(env.unwrapped.city, back_off_steps=-1)
+
+
 def test_agent_does_not_steer_on_a_lost_belief() -> None:
     """ "lost": stop and turn in place to look; "doubtful" and the like: the same steering at
     the slow factor; "tracking" (or no info): full speed."""
