@@ -31,6 +31,7 @@ from localization.filtering.measurement_noise import (
 )
 from localization.filtering.process_noise import estimate_control_gain, estimate_process_noise
 from localization.geometry import Array, body_to_world, pose_residual, to_body
+from localization.gse.graph import DisconnectedGraphError
 from localization.gse.regressor import GSERegressor
 
 MEASUREMENTS = ("pose", "features", "representation")
@@ -198,9 +199,7 @@ class NoiseModelMixin:
         for i, (train, test) in enumerate(folds.split(W)):
             try:
                 reg = self._new_regressor().fit(W[train], self._to_model(poses[train]))
-            except ValueError as err:
-                if "connected components" not in str(err):
-                    raise
+            except DisconnectedGraphError as err:
                 failed.append(f"fold {i}: {err}")
                 continue
             for k, e in self._residuals(reg, W[test], poses[test]).items():

@@ -183,21 +183,6 @@ def test_disconnected_sample_raises_with_component_count():
         GrassmannStiefelEigenmaps(2, n_neighbors=10).fit(Z)
 
 
-def test_disconnected_error_survives_pickling_with_its_labels():
-    # a fit in a worker process sends the error back pickled (a BrokenProcessPool before)
-    import pickle
-
-    from localization.gse.graph import DisconnectedGraphError
-
-    Z1, _, _ = swiss_roll(300, seed=0)
-    with pytest.raises(DisconnectedGraphError) as info:
-        GrassmannStiefelEigenmaps(2, n_neighbors=10).fit(np.vstack([Z1, Z1 + 500.0]))
-    back = pickle.loads(pickle.dumps(info.value))
-    assert str(back) == str(info.value)
-    np.testing.assert_array_equal(back.labels, info.value.labels)
-    assert np.bincount(back.labels).tolist() == [300, 300]
-
-
 def test_bad_inputs():
     Z, _, _ = swiss_roll(100, seed=0)
     g = GrassmannStiefelEigenmaps(2, n_neighbors=10)

@@ -60,6 +60,24 @@ def test_map_tasks_raises_the_task_error(workers: int) -> None:
         map_tasks(math.sqrt, [4.0, -1.0, 9.0], workers=workers, progress=False)
 
 
+def _split_fit(seed: int) -> None:
+    """A GSE fit whose neighbourhood graph falls in two (a module-level task for workers)."""
+    from localization.gse.embedding import GrassmannStiefelEigenmaps
+    from localization.synthetic import swiss_roll
+
+    Z, _, _ = swiss_roll(300, seed=seed)
+    GrassmannStiefelEigenmaps(2, n_neighbors=10).fit(np.vstack([Z, Z + 500.0]))
+
+
+def test_a_worker_s_disconnected_graph_comes_back_with_its_labels() -> None:
+    # the error crosses the process boundary (before, unpickling it broke the whole pool)
+    from localization.gse.graph import DisconnectedGraphError
+
+    with pytest.raises(DisconnectedGraphError, match="2 connected components") as info:
+        map_tasks(_split_fit, [0, 1], workers=2, progress=False)
+    assert np.bincount(info.value.labels).tolist() == [300, 300]
+
+
 def test_map_tasks_on_ray_keeps_the_task_order(ray_session: object) -> None:
     tasks = list(range(-6, 6))
     assert map_tasks(abs, tasks, workers=2, ray_address="auto", progress=False) == \
