@@ -11,7 +11,7 @@ district's maps hold too.
 The features of an image are those of every district side by side (``transform``: n x
 (K m)). A filter hands over between districts by the belief: :meth:`DistrictLocalizer.local`
 returns the district whose cell holds the pose (a :class:`District`: the
-:class:`~localization.filtering.belief.Localizer` interface on its block of the features),
+:class:`~localization.filtering.localizer_protocol.Localizer` interface on its block of the features),
 and :class:`~localization.filtering.belief.BeliefFilter` measures each image with the
 district at its prior mean. Without a pose (the first image, a restart) :meth:`initial_belief`
 asks every district and keeps the answer that lies in its own district and whose image lies
@@ -65,7 +65,7 @@ def district_cells(poses: ArrayLike, grid: tuple[int, int]) -> Array:
 
 
 class District:
-    """The :class:`~localization.filtering.belief.Localizer` of district ``index`` of a
+    """The :class:`~localization.filtering.localizer_protocol.Localizer` of district ``index`` of a
     :class:`DistrictLocalizer`: its localizer on its block of the concatenated features w
     (K m,), with the parent's consistency."""
 

@@ -12,7 +12,7 @@ simulator: runs on recorded data).
 - :class:`ParticleBelief`: the multi-hypothesis (particle-filter) belief.
 """
 
-from localization.filtering.belief import STATUSES, BeliefFilter, Localizer
+from localization.filtering.belief import STATUSES, BeliefFilter
 from localization.filtering.calibration import calibrate_consistency
 from localization.filtering.divergence import BELIEF_STATUSES, DivergenceMonitor
 from localization.filtering.ekf import (
@@ -26,6 +26,7 @@ from localization.filtering.ekf import (
     control_noise_Q,
     numerical_jacobian,
 )
+from localization.filtering.localizer_protocol import Localizer
 from localization.filtering.measurement_noise import (
     consistency_inflation,
     correlation_time,

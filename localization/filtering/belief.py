@@ -15,7 +15,11 @@ multiplied by ``inflate_factor`` each step, up to a standard deviation of
 accepted again. Only the heading: inflating the position too let a burst of aliased
 measurements through (one moved a belief 2.5 m sideways). An isolated outlier (e.g. a
 corrupted image) changes nothing. After ``relocalize_after`` steps in a row without an
-accepted measurement the belief restarts from psi* of the current image, as at the start.
+accepted measurement the belief restarts from psi* of the current image, as at the start,
+on trial: the belief it replaced runs on beside it and comes back unless the restart has
+``CONFIRM_STEPS`` accepted measurements within ``TRIAL_STEPS`` measured steps (one image's
+psi* may be a look-alike place, and a belief coasting through views off the maps may be
+right).
 Five steps without one make it "doubtful" while P is narrow (coasting on F through views
 off the maps, e.g. a turn at a corner on a lane-trained map) and "lost" once P is too wide
 to steer on.
@@ -35,7 +39,7 @@ the training poses' spread until the images agree.
 
 from __future__ import annotations
 
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -49,50 +53,14 @@ from localization.filtering.ekf import (
     check_gate_probability,
     check_motion_model,
 )
+from localization.filtering.localizer_protocol import Localizer, check_localizer
 from localization.geometry import Array
-
-
-class Localizer(Protocol):
-    """What the belief needs from a fitted localizer (e.g.
-    :class:`~localization.localizer.AppearanceLocalizer`): measurement models, the noise
-    model and an initial belief from one image's features.
-
-    A localizer of several maps (:class:`~localization.districts.DistrictLocalizer`) also
-    has ``local(x)``: the localizer in charge at pose x. The belief then measures each
-    image, and takes its measurement model, from the one in charge at its prior mean (a
-    hand-over between districts); ``initial_belief`` and ``measure(w, "pose")`` need no
-    pose."""
-
-    control_gain_: Any
-
-    def consistency(self, measurement: str) -> Array: ...
-    def measurement_model(self, measurement: str, alpha: ArrayLike | None = None,
-                          **options: Any) -> Any: ...
-    def process_noise(self, pose: ArrayLike, alpha: ArrayLike | None = None) -> Array: ...
-    def initial_belief(self, w: ArrayLike) -> tuple[Array, Array]: ...
-    def prior(self) -> tuple[Array, Array]: ...
-    def measure(self, w: ArrayLike, measurement: str) -> Array: ...
-
-
-
-def check_localizer(localizer: object) -> Localizer:
-    """``localizer`` if it is a :class:`Localizer` (TypeError otherwise); a localizer that can
-    tell (``check_ready``) raises its own error when it is not fitted or has no noise model."""
-    names = ("measurement_model", "process_noise", "initial_belief", "measure", "consistency")
-    if not all(callable(getattr(localizer, m, None)) for m in names):
-        raise TypeError("localizer must be a fitted localizer (e.g. AppearanceLocalizer), got "
-                        f"{type(localizer).__name__}")
-    check_ready = getattr(localizer, "check_ready", None)
-    if callable(check_ready):
-        check_ready()
-    return localizer  # type: ignore[return-value]
-
 
 STATUSES = ("initial", "accepted", "gated", "out_of_domain", "relocalized", "reverted")
 NOISE_MODELS = ("global", "heteroscedastic")
 RESET_MODES = ("image", "global")
 CONFIRM_STEPS = 3  # accepted measurements after a restart before the status is "tracking"
-TRIAL_STEPS = 5  # a divergence restart must have CONFIRM_STEPS accepted within these, or undo
+TRIAL_STEPS = 5  # a restart must have CONFIRM_STEPS accepted within these, or undo
 LOST_AFTER_MISSES = 5  # steps in a row without an accepted measurement: "doubtful" or "lost"
 #: ... "lost" when P is also this wide (position std in m along its widest axis, heading std in
 #: rad); else "doubtful": dead reckoning through unfamiliar views at a corner is not being lost
@@ -183,6 +151,7 @@ class BeliefFilter:
         self.belief_status = "tracking"
         self._confirm = 0
         self._forced = self._lost_now = self._doubtful_now = False
+        self._placed = False  # the belief came from an image or x0, not the prior
         self._trial: dict[str, Any] | None = None  # the EKF a restart replaced, on trial
 
     @property
@@ -231,7 +200,7 @@ class BeliefFilter:
         self.ekf = PoseEKF(self.motion_model, self._Q, x0, P0,
                            gate_probability=self.gate_probability)
         self.misses = self.gated = 0
-        self._confirm, self._forced = 0, False
+        self._confirm, self._forced, self._placed = 0, False, True
         if self.monitor is not None:
             self.monitor.clear()
 
@@ -270,6 +239,7 @@ class BeliefFilter:
             return "initial"
         mean, cov = self.localizer.prior()
         self._start(mean, cov)
+        self._placed = False
         if self.monitor is not None and mode == "global":
             self._forced = True  # restart where the images agree
         else:
@@ -305,19 +275,29 @@ class BeliefFilter:
             self.misses = 0
         else:
             self.misses += 1
-            if (self.relocalize_after is not None and self.misses >= self.relocalize_after
-                    and self._from_image(w)):
-                status = "relocalized"
+            if self.relocalize_after is not None and self.misses >= self.relocalize_after:
+                status = self._relocalize(w, status)
         self._lost_now = self._doubtful_now = False
         if status == "relocalized":
             self.belief_status = "relocalizing"
-            self._trial = None
         elif self._trial is not None:
             status = self._on_trial(u, w, status)
         elif self.monitor is not None:
             status = self._watch(u, w, nis, status)
         self._update_status(status)
         return nis, status
+
+    def _relocalize(self, w: Array, status: str) -> str:
+        """Restart at psi*(w) after ``relocalize_after`` misses, on trial against the belief it
+        replaces (:meth:`_on_trial`): a belief coasting through views off the maps may be
+        right, and one image's psi* may be a look-alike place. No trial for a belief that
+        was never placed (a start off the maps)."""
+        prior, misses, placed = self.ekf, self.misses, self._placed
+        if not self._from_image(w):
+            return status
+        self._trial = ({"ekf": prior, "misses": misses, "steps": 0, "accepted": 0}
+                       if placed else None)
+        return "relocalized"
 
     def _watch(self, u: ArrayLike, w: Array, nis: float, status: str) -> str:
         """Feed the divergence monitor; restart from the proposals when it says so."""

@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from localization.filtering.belief import BeliefFilter, Localizer
+from localization.filtering.belief import BeliefFilter
+from localization.filtering.localizer_protocol import Localizer
 from localization.filtering.measurement_noise import consistency_inflation, inflate
 from localization.geometry import Array, body_to_world
 

@@ -153,3 +153,54 @@ def test_misses_are_doubt_while_p_is_narrow_and_lost_once_it_is_wide(localizer, 
     statuses = [f.step(controls[t - 1], W[t + 120])[1] for t in range(2 * LOST_AFTER_MISSES, 40)]
     assert statuses.count("gated") >= 0.9 * len(statuses), statuses  # images 12 m on
     assert f.belief_status == "lost" and np.sqrt(f.ekf.P[2, 2]) > LOST_HEADING_STD
+
+
+def _plain_filter(localizer, W, poses, controls, relocalize_after):
+    """A plain EKF (no divergence monitor) tracking the shared drive up to START."""
+    from localization.filtering.belief import BeliefFilter
+    from tests.localization.conftest import make_env
+
+    env = make_env()
+    f = BeliefFilter(localizer, env.unwrapped.motion_model, relocalize_after=relocalize_after)
+    env.close()
+    f.reset(W[0], poses[0], P)
+    for t in range(1, START):
+        f.step(controls[t - 1], W[t])
+    return f
+
+
+def test_a_relocalization_at_a_look_alike_is_undone(localizer, drive):
+    """After ``relocalize_after`` images off the maps the belief restarts at the next
+    image's psi*; that image is from 12 m on (a look-alike), the images after it are the
+    robot's own again: they are gated at the restart and fit the belief that coasted, which
+    comes back ("reverted") instead of staying 12 m off."""
+    from localization.filtering.belief import TRIAL_STEPS
+
+    images, poses, controls = drive
+    W = localizer.transform(images)
+    n = 2 * TRIAL_STEPS  # relocalize_after: more than a trial lasts
+    f = _plain_filter(localizer, W, poses, controls, relocalize_after=n)
+    off_map = W[0] + 100.0 * W.std(axis=0)
+    statuses = [f.step(controls[t - 1], off_map)[1] for t in range(START, START + n)]
+    statuses.append(f.step(controls[START + n - 1], W[START + n + 120])[1])
+    assert statuses == ["out_of_domain"] * n + ["relocalized"], statuses
+    assert np.hypot(*(f.x[:2] - poses[START + n][:2])) > 3.0  # at the look-alike
+    end = START + n + 1 + 2 * TRIAL_STEPS
+    statuses = [f.step(controls[t - 1], W[t])[1] for t in range(START + n + 1, end)]
+    assert "reverted" in statuses, statuses
+    assert np.hypot(*(f.x[:2] - poses[end - 1][:2])) < 0.5
+
+
+def test_a_start_off_the_maps_relocalizes_without_a_trial(localizer, drive):
+    """A belief that never had a place (started from the prior: the first image off the
+    maps) has nothing to come back to: its relocalization is not on trial."""
+    from localization.filtering.belief import BeliefFilter
+    from tests.localization.conftest import make_env
+
+    images, poses, controls = drive
+    W = localizer.transform(images)
+    env = make_env()
+    f = BeliefFilter(localizer, env.unwrapped.motion_model)
+    env.close()
+    assert f.reset(W[0] + 100.0 * W.std(axis=0)) == "out_of_domain"
+    assert f.step(controls[0], W[1])[1] == "relocalized" and f._trial is None
