@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from agents.planner import PlannedPath, StreetPlanner, check_city_point, round_corners
 from envs.driving import bearing, pursuit_turn_rate
 from localization._validation import check_array, check_int, check_real
-from localization.geometry import Array
+from localization.geometry import Array, wrap_angle
 
 __all__ = ["BELIEF_KEYS", "PLANS", "SLOW_STATUSES", "STOP_STATUSES", "Navigator", "ScriptedAgent",
            "check_belief_observation", "pure_pursuit"]
@@ -27,6 +27,15 @@ BELIEF_KEYS = ("pose_mean", "pose_cov", "goal")
 STOP_STATUSES = ("lost",)
 SLOW_STATUSES = ("relocalizing", "ambiguous", "doubtful")
 OBS_NAMES = ("obs['pose_mean']", "obs['goal']")  # how Navigator.update names them in errors
+#: While lost the agent turns to the street axes (multiples of pi/2: the city's streets run
+#: along x and y), the headings a lane-trained map has views at; within this many rad of one
+#: it stops turning and looks.
+LOOK_TOLERANCE = 0.05
+
+
+def street_axis(yaw: float) -> float:
+    """The street direction (a multiple of pi/2) nearest to heading ``yaw`` (rad)."""
+    return float(np.round(yaw / (np.pi / 2)) * (np.pi / 2))
 
 
 def check_belief_observation(obs: Any) -> tuple[Array, Array, Array]:
@@ -145,14 +154,20 @@ class ScriptedAgent:
         turns on the spot (:class:`Navigator`).
     back_off_steps : int — steps it reverses after a contact (0: never).
     back_off_speed : float — reversing speed (m/s).
+    look_dwell : int — steps it looks along each street axis while lost.
 
     Notes
     -----
     ``act(obs, info)`` takes one belief observation (keys ``pose_mean``, ``pose_cov``,
     ``goal``) and, optionally, the step's ``info``, and returns the action U = [v, w]
     (float32, inside the env's action Box). When ``info["belief_status"]`` is "lost" the
-    agent does not steer on the belief: it stops and turns in place at ``look_rate`` to show
-    the camera new views; "relocalizing" or "ambiguous" scale the speed by ``slow_factor``.
+    agent does not steer on the belief: it stops, turns in place at ``look_rate`` to the
+    street axis nearest its believed heading (the streets run along x and y: the views a
+    lane-trained map knows), looks along it for ``look_dwell`` steps, then turns a quarter
+    turn on to the next axis, and so on (turning at one rate through the views off the map
+    lost beliefs that were right: a lane map rejects them all until the 50-step restart
+    jumps to a look-alike); "relocalizing", "doubtful" or "ambiguous" scale the speed by
+    ``slow_factor``.
     The status comes through ``info``, not the observation, so every pose source keeps the
     same observation space (and trained policies keep working). So does its bumper:
     ``info["collision"]`` (contact with a building, the boundary or a vehicle, what a
@@ -167,11 +182,14 @@ class ScriptedAgent:
     def __init__(self, city: Any, lookahead: float = 0.6, speed: float = 0.9, w_max: float = 1.0,
                  turn_in_place: float = 0.6, replan_distance: float = 1.0,
                  look_rate: float = 0.5, slow_factor: float = 0.5, plan: str = "drive",
-                 back_off_steps: int = 5, back_off_speed: float = 0.3) -> None:
+                 back_off_steps: int = 5, back_off_speed: float = 0.3,
+                 look_dwell: int = 10) -> None:
         self.navigator = Navigator(city, replan_distance, plan)
         self.back_off_steps = check_int(back_off_steps, "back_off_steps", low=0)
         self.back_off_speed = check_real(back_off_speed, "back_off_speed", low=0.0, high=1.0)
         self._backing = 0  # steps of reversing left
+        self.look_dwell = check_int(look_dwell, "look_dwell", low=0)
+        self._look: list[float] | None = None  # while lost: [street axis, steps left there]
         self.look_rate = check_real(look_rate, "look_rate", low=0.0)
         self.slow_factor = check_real(slow_factor, "slow_factor", low=0.0, high=1.0)
         self.lookahead, self.speed, self.w_max, self.turn_in_place = (
@@ -183,6 +201,7 @@ class ScriptedAgent:
         """Forget the current plan (and stop reversing)."""
         self.navigator.reset()
         self._backing = 0
+        self._look = None
 
     @property
     def path(self) -> Array | None:
@@ -201,10 +220,26 @@ class ScriptedAgent:
             self._backing -= 1
             return np.array([-self.back_off_speed, 0.0], dtype=np.float32)
         if status in STOP_STATUSES:
-            return np.array([0.0, min(self.look_rate, self.w_max)], dtype=np.float32)
+            return self._look_around(float(mean[2]))
+        self._look = None
         path = self.navigator.update(mean, goal, OBS_NAMES)
         u = pure_pursuit(mean, path.ahead(self.lookahead), path.remaining(), self.speed,
                          self.w_max, self.turn_in_place)
         if status in SLOW_STATUSES:
             u[0] *= self.slow_factor
         return u.astype(np.float32)
+
+    def _look_around(self, yaw: float) -> NDArray[np.float32]:
+        """Lost: turn on the spot to the nearest street axis of the believed heading ``yaw``,
+        look along it for ``look_dwell`` steps, then turn on a quarter turn to the next."""
+        if self._look is None:
+            self._look = [street_axis(yaw), self.look_dwell]
+        error = float(wrap_angle(self._look[0] - yaw))
+        if abs(error) <= LOOK_TOLERANCE:
+            if self._look[1] > 0:
+                self._look[1] -= 1
+                return np.zeros(2, dtype=np.float32)
+            self._look = [self._look[0] + np.pi / 2, self.look_dwell]
+            error = float(wrap_angle(self._look[0] - yaw))
+        return np.array([0.0, np.copysign(min(self.look_rate, self.w_max), error)],
+                        dtype=np.float32)

@@ -137,7 +137,35 @@ def test_agent_does_not_steer_on_a_lost_belief() -> None:
     assert np.array_equal(tracking, agent.act(belief))
     assert tracking[0] > 0
     lost = agent.act(belief, {"belief_status": "lost"})
-    assert lost[0] == 0.0 and lost[1] == pytest.approx(0.5)
+    assert lost[0] == 0.0 and abs(lost[1]) in (0.0, pytest.approx(0.5))  # see the next test
     for status in ("doubtful", "relocalizing", "ambiguous"):
         slow = agent.act(belief, {"belief_status": status})
         assert slow[0] == pytest.approx(0.5 * tracking[0]) and slow[1] == pytest.approx(tracking[1])
+
+
+def test_a_lost_agent_turns_to_the_street_axes_and_looks_along_each() -> None:
+    """ "lost": turn on the spot the short way to the street axis nearest the believed
+    heading, stop there ``look_dwell`` steps, then a quarter turn on to the next axis; a
+    status that is not "lost" ends the look (the next one starts at the nearest axis)."""
+    env = gym.make("AppearanceNav-v0", scene_seed=0)
+    agent = ScriptedAgent(env.unwrapped.city, look_rate=0.5, look_dwell=3)
+    obs, info = env.reset(seed=3)
+    env.close()
+    lost = {"belief_status": "lost"}
+    pose = info["pose"].copy()
+
+    def act(yaw: float, status: dict | None = lost) -> np.ndarray:
+        pose[2] = yaw
+        return agent.act(_belief(pose, obs["goal"]), status)
+
+    np.testing.assert_array_equal(act(0.3), [0.0, -0.5])  # axis 0 is 0.3 rad clockwise
+    np.testing.assert_array_equal(act(0.1), [0.0, -0.5])
+    for _ in range(3):
+        np.testing.assert_array_equal(act(0.01), [0.0, 0.0])  # looks along the street
+    np.testing.assert_array_equal(act(0.01), [0.0, 0.5])  # on to pi / 2
+    np.testing.assert_array_equal(act(1.2), [0.0, 0.5])
+    np.testing.assert_array_equal(act(1.56), [0.0, 0.0])
+    act(1.56, {"belief_status": "tracking"})
+    np.testing.assert_array_equal(act(-3.0), [0.0, -0.5])  # nearest axis: -pi, the short way
+    with pytest.raises(ValueError, match="look_dwell"):
+        ScriptedAgent(env.unwrapped.city, look_dwell=-1)
