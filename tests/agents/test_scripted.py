@@ -104,6 +104,8 @@ def test_body_frame_and_navigation_features():
 
 
 def test_agent_backs_off_after_a_contact_then_steers_again() -> None:
+    """A contact: reverse ``back_off_steps`` steps, then the plan again; still in contact after
+    two steps of reversing: forward instead."""
     env = gym.make("AppearanceNav-v0", scene_seed=0)
     agent = ScriptedAgent(env.unwrapped.city, back_off_steps=3, back_off_speed=0.2)
     obs, info = env.reset(seed=3)
@@ -117,6 +119,10 @@ def test_agent_backs_off_after_a_contact_then_steers_again() -> None:
     agent.act(belief, {"collision": True})
     agent.reset()  # a new episode does not inherit the reversing
     np.testing.assert_array_equal(agent.act(belief), steer)
+    # a contact that lasts while reversing: the obstacle is behind, back off forward
+    agent = ScriptedAgent(env.unwrapped.city, back_off_steps=4, back_off_speed=0.2)
+    pressed = [agent.act(belief, {"collision": True})[0] for _ in range(5)]
+    assert pressed == pytest.approx([-0.2, -0.2, 0.2, 0.2, 0.2]), pressed  # 2 steps back
     with pytest.raises(ValueError, match="back_off_steps"):
         ScriptedAgent(env.unwrapped.city, back_off_steps=-1)
 
