@@ -94,7 +94,10 @@ def test_scripted_agent_stops_and_looks_when_lost():
     go = agent.act(obs, {"belief_status": "tracking"})
     assert np.array_equal(go, agent.act(obs))  # no info: as before
     lost = agent.act(obs, {"belief_status": "lost"})
-    assert lost[0] == 0.0 and lost[1] != 0.0  # stops, turns in place to look
+    assert lost[0] == 0.0 and lost[1] == 0.0  # stops; heading 0 is a street axis: looks
+    turned = {**obs, "pose_mean": obs["pose_mean"] + np.array([0.0, 0.0, 0.4])}
+    lost = agent.act(turned, {"belief_status": "lost"})
+    assert lost[0] == 0.0 and lost[1] < 0.0  # turns in place back to the axis
     slow = agent.act(obs, {"belief_status": "relocalizing"})
     assert slow[0] == pytest.approx(0.5 * go[0]) and slow[1] == pytest.approx(go[1])
     env.close()

@@ -197,7 +197,7 @@ def test_a_start_off_the_maps_relocalizes_without_a_trial(localizer, drive):
     from localization.filtering.belief import BeliefFilter
     from tests.localization.conftest import make_env
 
-    images, poses, controls = drive
+    images, _, controls = drive
     W = localizer.transform(images)
     env = make_env()
     f = BeliefFilter(localizer, env.unwrapped.motion_model)
