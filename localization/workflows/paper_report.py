@@ -95,6 +95,13 @@ def _fmt(v: float | None, digits: int = 4) -> str:
     return "failed" if not np.isfinite(v) else f"{v:.{digits}f}"
 
 
+def _best_bold(values: list[float | None]) -> list[str]:
+    """The values formatted, the smallest finite one in bold (the best RRMSE of a row)."""
+    finite = [v for v in values if v is not None and np.isfinite(v)]
+    best = min(finite) if finite else None
+    return [f"**{_fmt(v)}**" if v is not None and v == best else _fmt(v) for v in values]
+
+
 def _rows(report: dict[str, Any], dataset: str) -> dict[tuple[str, str], dict[str, Any]]:
     rows: dict[tuple[str, str], dict[str, Any]] = {}
     for r in report["table2"]:
@@ -138,8 +145,8 @@ def tables_markdown(report: dict[str, Any]) -> str:
         g, k, n = (m.get(x) for x in ("gse", "knr", "knn"))
         p = PAPER_TABLE2.get(cam, (None, None))
         ratio = g["rrmse"] / k["rrmse"] if g and k else None
-        lines.append(f"| {cam} | {FEATURE_NAMES.get(feat, feat)} | **{_fmt(g and g['rrmse'])}**"
-                     f" | {_fmt(k and k['rrmse'])} | {_fmt(n and n['rrmse'])} | "
+        cells = _best_bold([x["rrmse"] if x else None for x in (g, k, n)])
+        lines.append(f"| {cam} | {FEATURE_NAMES.get(feat, feat)} | {' | '.join(cells)} | "
                      f"{_fmt(ratio, 2)} | {_fmt(g and g['median_m'], 3)} | "
                      f"{_fmt(k and k['median_m'], 3)} | {_fmt(p[0], 3)} | {_fmt(p[1], 3)} |")
     rand = _rows(report, "random")
