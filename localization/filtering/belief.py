@@ -151,7 +151,7 @@ class BeliefFilter:
         self.belief_status = "tracking"
         self._confirm = 0
         self._forced = self._lost_now = self._doubtful_now = False
-        self._placed = False  # the belief came from an image or x0, not the prior
+        self._placed = False  # True once the belief came from an image or x0 (not the prior)
         self._trial: dict[str, Any] | None = None  # the EKF a restart replaced, on trial
 
     @property
@@ -332,11 +332,12 @@ class BeliefFilter:
         return ok or forced  # an unknown start takes the agreed place either way
 
     def _on_trial(self, u: ArrayLike, w: Array, status: str) -> str:
-        """A divergence restart on trial: the EKF it replaced runs on beside it (same F, same
-        measurements); unless the restarted one has ``CONFIRM_STEPS`` accepted measurements
-        within ``TRIAL_STEPS`` steps with a measurement (out-of-domain steps do not count),
-        the replaced one comes back ("reverted"): a run of aliased images can agree on a
-        wrong place, and the images that follow do not."""
+        """A restart on trial (by the monitor or after ``relocalize_after`` misses): the EKF it
+        replaced runs on beside it (same F, same measurements); unless the restarted one has
+        ``CONFIRM_STEPS`` accepted measurements within ``TRIAL_STEPS`` steps with a
+        measurement (out-of-domain steps do not count), the replaced one comes back
+        ("reverted"): a run of aliased images can agree on a wrong place, and the images that
+        follow do not."""
         trial = self._trial
         assert trial is not None and self.ekf is not None
         old: PoseEKF = trial["ekf"]
