@@ -295,9 +295,14 @@ class BeliefFilter:
         prior, misses, placed = self.ekf, self.misses, self._placed
         if not self._from_image(w):
             return status
-        self._trial = ({"ekf": prior, "misses": misses, "steps": 0, "accepted": 0}
-                       if placed else None)
+        self._put_on_trial(prior if placed else None, misses)
         return "relocalized"
+
+    def _put_on_trial(self, replaced: PoseEKF | None, misses: int) -> None:
+        """The restarted EKF is on trial against ``replaced`` (None: nothing to come back to),
+        which had ``misses`` steps without an accepted measurement (:meth:`_on_trial`)."""
+        self._trial = None if replaced is None else {
+            "ekf": replaced, "misses": misses, "steps": 0, "accepted": 0}
 
     def _watch(self, u: ArrayLike, w: Array, nis: float, status: str) -> str:
         """Feed the divergence monitor; restart from the proposals when it says so."""
@@ -328,7 +333,7 @@ class BeliefFilter:
         if not ok and not forced:
             self.ekf, (self.misses, self.gated) = prior, kept
         elif ok and not forced and prior is not None:
-            self._trial = {"ekf": prior, "misses": kept[0], "steps": 0, "accepted": 0}
+            self._put_on_trial(prior, kept[0])
         return ok or forced  # an unknown start takes the agreed place either way
 
     def _on_trial(self, u: ArrayLike, w: Array, status: str) -> str:

@@ -83,22 +83,31 @@ def test_bad_settings_are_named(name, value):
 
 # ---------------------------------------------------------------- a restart on trial
 START = 60  # the plain EKF accepts every image of the shared drive from here to step 200
+def _tracking(localizer, W, drive, **options):
+    """A BeliefFilter with ``options`` run on the shared drive (features ``W``) up to START."""
+    from localization.filtering.belief import BeliefFilter
+    from tests.localization.conftest import make_env
+
+    _, poses, controls = drive
+    env = make_env()
+    f = BeliefFilter(localizer, env.unwrapped.motion_model, **options)
+    env.close()
+    f.reset(W[0], poses[0], P)
+    for t in range(1, START):
+        f.step(controls[t - 1], W[t])
+    return f
+
+
 def _tracking_then_trial(localizer, drive, incumbent_error: float):
     """A detecting EKF run on the shared drive up to START, then put on trial as a
     divergence restart leaves it; the replaced EKF is ``incumbent_error`` m from where the
     running one is (0: the running one is moved 3 m off instead). Returns the filter and
     the statuses of the next 3 * TRIAL_STEPS steps."""
     from localization.filtering.belief import TRIAL_STEPS, BeliefFilter
-    from tests.localization.conftest import make_env
 
     images, poses, controls = drive
     W = localizer.transform(images)
-    env = make_env()
-    f = BeliefFilter(localizer, env.unwrapped.motion_model, detect_divergence=True)
-    env.close()
-    f.reset(W[0], poses[0], P)
-    for t in range(1, START):
-        f.step(controls[t - 1], W[t])
+    f = _tracking(localizer, W, drive, detect_divergence=True)
     if incumbent_error:
         other = BeliefFilter(localizer, f.motion_model)
         other.reset(W[START - 1], poses[START - 1] + np.array([incumbent_error, 0.0, 0.0]), P)
@@ -106,7 +115,7 @@ def _tracking_then_trial(localizer, drive, incumbent_error: float):
     else:
         incumbent, misses = f.ekf, f.misses
         f._start(f.x + np.array([3.0, 0.0, 0.0]), P)  # what a restart at aliased images does
-    f._trial = {"ekf": incumbent, "misses": misses, "steps": 0, "accepted": 0}
+    f._put_on_trial(incumbent, misses)
     f.belief_status = "relocalizing"
     end = START + 3 * TRIAL_STEPS
     statuses = [f.step(controls[t - 1], W[t])[1] for t in range(START, end)]
@@ -155,20 +164,6 @@ def test_misses_are_doubt_while_p_is_narrow_and_lost_once_it_is_wide(localizer, 
     assert f.belief_status == "lost" and np.sqrt(f.ekf.P[2, 2]) > LOST_HEADING_STD
 
 
-def _plain_filter(localizer, W, poses, controls, relocalize_after):
-    """A plain EKF (no divergence monitor) tracking the shared drive up to START."""
-    from localization.filtering.belief import BeliefFilter
-    from tests.localization.conftest import make_env
-
-    env = make_env()
-    f = BeliefFilter(localizer, env.unwrapped.motion_model, relocalize_after=relocalize_after)
-    env.close()
-    f.reset(W[0], poses[0], P)
-    for t in range(1, START):
-        f.step(controls[t - 1], W[t])
-    return f
-
-
 def test_a_relocalization_at_a_look_alike_is_undone(localizer, drive):
     """After ``relocalize_after`` images off the maps the belief restarts at the next
     image's psi*; that image is from 12 m on (a look-alike), the images after it are the
@@ -179,7 +174,7 @@ def test_a_relocalization_at_a_look_alike_is_undone(localizer, drive):
     images, poses, controls = drive
     W = localizer.transform(images)
     n = 2 * TRIAL_STEPS  # relocalize_after: more than a trial lasts
-    f = _plain_filter(localizer, W, poses, controls, relocalize_after=n)
+    f = _tracking(localizer, W, drive, relocalize_after=n)
     off_map = W[0] + 100.0 * W.std(axis=0)
     statuses = [f.step(controls[t - 1], off_map)[1] for t in range(START, START + n)]
     statuses.append(f.step(controls[START + n - 1], W[START + n + 120])[1])
