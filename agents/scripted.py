@@ -192,7 +192,8 @@ class ScriptedAgent:
         self._backing = 0  # steps of backing off left
         self._back_sign = -1.0  # -1 reversing, +1 forward (the contact came while reversing)
         self.look_dwell = check_int(look_dwell, "look_dwell", low=0)
-        self._look: list[float] | None = None  # while lost: [street axis, steps left there]
+        self._look_axis: float | None = None  # while lost: the street axis it turns to
+        self._look_left = 0  # steps it still looks along that axis
         self.look_rate = check_real(look_rate, "look_rate", low=0.0)
         self.slow_factor = check_real(slow_factor, "slow_factor", low=0.0, high=1.0)
         self.lookahead, self.speed, self.w_max, self.turn_in_place = (
@@ -204,7 +205,7 @@ class ScriptedAgent:
         """Forget the current plan (and stop reversing)."""
         self.navigator.reset()
         self._backing, self._back_sign = 0, -1.0
-        self._look = None
+        self._look_axis = None
 
     @property
     def path(self) -> Array | None:
@@ -224,7 +225,7 @@ class ScriptedAgent:
             return np.array([self._back_sign * self.back_off_speed, 0.0], dtype=np.float32)
         if status in STOP_STATUSES:
             return self._look_around(float(mean[2]))
-        self._look = None
+        self._look_axis = None
         path = self.navigator.update(mean, goal, OBS_NAMES)
         u = pure_pursuit(mean, path.ahead(self.lookahead), path.remaining(), self.speed,
                          self.w_max, self.turn_in_place)
@@ -244,14 +245,14 @@ class ScriptedAgent:
     def _look_around(self, yaw: float) -> NDArray[np.float32]:
         """Lost: turn on the spot to the nearest street axis of the believed heading ``yaw``,
         look along it for ``look_dwell`` steps, then turn on a quarter turn to the next."""
-        if self._look is None:
-            self._look = [street_axis(yaw), self.look_dwell]
-        error = float(wrap_angle(self._look[0] - yaw))
+        if self._look_axis is None:
+            self._look_axis, self._look_left = street_axis(yaw), self.look_dwell
+        error = float(wrap_angle(self._look_axis - yaw))
         if abs(error) <= LOOK_TOLERANCE:
-            if self._look[1] > 0:
-                self._look[1] -= 1
+            if self._look_left > 0:
+                self._look_left -= 1
                 return np.zeros(2, dtype=np.float32)
-            self._look = [self._look[0] + np.pi / 2, self.look_dwell]
-            error = float(wrap_angle(self._look[0] - yaw))
+            self._look_axis, self._look_left = self._look_axis + np.pi / 2, self.look_dwell
+            error = float(wrap_angle(self._look_axis - yaw))
         return np.array([0.0, np.copysign(min(self.look_rate, self.w_max), error)],
                         dtype=np.float32)
