@@ -254,10 +254,11 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         if isinstance(self.belief, ParticleBelief):
             if seed is not None and not self._seeded:
                 self.belief.rng = np.random.default_rng([seed, 0x5EED])
-            status = self.belief.reset(w, mode=localize)
+        status = self.belief.reset(w, mode=localize)
+        if isinstance(self.belief, BeliefFilter):
+            self.belief_status = self.belief.belief_status  # a start from one image: relocalizing
         else:
-            status = self.belief.reset(w, mode=localize)
-        self.belief_status = "relocalizing" if localize == "global" else "tracking"
+            self.belief_status = "relocalizing" if localize == "global" else "tracking"
         self._publish(info, np.nan, status)
         return self.observation(obs), info
 

@@ -205,10 +205,15 @@ class BeliefFilter:
             self.monitor.clear()
 
     def _from_image(self, w: Array) -> bool:
+        """Start at psi*(w) with its noise, unconfirmed: "relocalizing" and on trial with
+        nothing to come back to (:meth:`_on_trial` starts again at a later image's psi* unless
+        this one is confirmed). False (nothing changed) when psi*(w) is out of domain."""
         x0, P0 = self.localizer.initial_belief(w)
         if not np.all(np.isfinite(x0)):
             return False
         self._start(x0, P0)
+        self._put_on_trial(None, 0)
+        self.belief_status = "relocalizing"
         return True
 
     def reset(self, w: ArrayLike, x0: ArrayLike | None = None, P0: ArrayLike | None = None,
@@ -230,7 +235,7 @@ class BeliefFilter:
             raise ValueError(f"unknown reset mode {mode!r}; choose one of {RESET_MODES}")
         if mode == "global" and x0 is not None:
             raise ValueError("mode='global' starts from an unknown pose: do not pass x0")
-        self.last_update = None
+        self.last_update, self._trial = None, None
         self.belief_status = "tracking"
         if x0 is not None:
             self._start(x0, P0 if P0 is not None else np.diag([0.01, 0.01, 0.001]))
@@ -292,17 +297,17 @@ class BeliefFilter:
         replaces (:meth:`_on_trial`): a belief coasting through views off the maps may be
         right, and one image's psi* may be a look-alike place. No trial for a belief that
         was never placed (a start off the maps)."""
-        prior, misses, placed = self.ekf, self.misses, self._placed
+        prior, misses, keep = self.ekf, self.misses, self._placed and self._trial is None
         if not self._from_image(w):
             return status
-        self._put_on_trial(prior if placed else None, misses)
+        if keep:
+            self._put_on_trial(prior, misses)
         return "relocalized"
 
     def _put_on_trial(self, replaced: PoseEKF | None, misses: int) -> None:
         """The restarted EKF is on trial against ``replaced`` (None: nothing to come back to),
         which had ``misses`` steps without an accepted measurement (:meth:`_on_trial`)."""
-        self._trial = None if replaced is None else {
-            "ekf": replaced, "misses": misses, "steps": 0, "accepted": 0}
+        self._trial = {"ekf": replaced, "misses": misses, "steps": 0, "accepted": 0}
 
     def _watch(self, u: ArrayLike, w: Array, nis: float, status: str) -> str:
         """Feed the divergence monitor; restart from the proposals when it says so."""
@@ -337,14 +342,34 @@ class BeliefFilter:
         return ok or forced  # an unknown start takes the agreed place either way
 
     def _on_trial(self, u: ArrayLike, w: Array, status: str) -> str:
-        """A restart on trial (by the monitor or after ``relocalize_after`` misses): the EKF it
-        replaced runs on beside it (same F, same measurements); unless the restarted one has
-        ``CONFIRM_STEPS`` accepted measurements within ``TRIAL_STEPS`` steps with a
-        measurement (out-of-domain steps do not count), the replaced one comes back
+        """A (re)start on trial (from an image at the start, by the monitor or after
+        ``relocalize_after`` misses): unless it has ``CONFIRM_STEPS`` accepted measurements
+        within ``TRIAL_STEPS`` steps with a measurement (out-of-domain steps do not count), the
+        EKF it replaced, which runs on beside it (same F, same measurements), comes back
         ("reverted"): a run of aliased images can agree on a wrong place, and the images that
-        follow do not."""
+        follow do not. With nothing to come back to (a start from one image), the belief
+        starts again at the current image's psi* ("relocalized"): on tuning city 13 a first
+        image's psi* 11 m off stood for 78 steps until the 50-step restart."""
         trial = self._trial
         assert trial is not None and self.ekf is not None
+        if trial["ekf"] is not None:
+            self._step_replaced(trial, u, w)
+        trial["steps"] += status != "out_of_domain"  # an image off the maps tells nothing
+        trial["accepted"] += status == "accepted"
+        if trial["accepted"] >= CONFIRM_STEPS or trial["steps"] < TRIAL_STEPS:
+            self._trial = None if trial["accepted"] >= CONFIRM_STEPS else trial
+            return status
+        self._trial = None
+        if trial["ekf"] is None:
+            return "relocalized" if self._from_image(w) else status
+        self.ekf, self.misses, self.gated = trial["ekf"], trial["misses"], 0
+        self.belief_status = "tracking"
+        if self.monitor is not None:
+            self.monitor.clear()
+        return "reverted"
+
+    def _step_replaced(self, trial: dict[str, Any], u: ArrayLike, w: Array) -> None:
+        """Predict and update the EKF on trial's replaced belief; count its misses."""
         old: PoseEKF = trial["ekf"]
         old.predict(self.gain * np.asarray(u, dtype=np.float64))
         z, model = self._measurement(old.x, w)
@@ -353,17 +378,6 @@ class BeliefFilter:
         except OutOfDomainError:
             took = False
         trial["misses"] = 0 if took else trial["misses"] + 1
-        trial["steps"] += status != "out_of_domain"  # an image off the maps tells nothing
-        trial["accepted"] += status == "accepted"
-        if trial["accepted"] >= CONFIRM_STEPS or trial["steps"] < TRIAL_STEPS:
-            self._trial = None if trial["accepted"] >= CONFIRM_STEPS else trial
-            return status
-        self._trial = None
-        self.ekf, self.misses, self.gated = old, trial["misses"], 0
-        self.belief_status = "tracking"
-        if self.monitor is not None:
-            self.monitor.clear()
-        return "reverted"
 
     def _update_status(self, status: str) -> None:
         """"relocalizing" until ``CONFIRM_STEPS`` accepted measurements; otherwise "lost"

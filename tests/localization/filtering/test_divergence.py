@@ -186,9 +186,9 @@ def test_a_relocalization_at_a_look_alike_is_undone(localizer, drive):
     assert np.hypot(*(f.x[:2] - poses[end - 1][:2])) < 0.5
 
 
-def test_a_start_off_the_maps_relocalizes_without_a_trial(localizer, drive):
+def test_a_start_off_the_maps_relocalizes_with_nothing_to_come_back_to(localizer, drive):
     """A belief that never had a place (started from the prior: the first image off the
-    maps) has nothing to come back to: its relocalization is not on trial."""
+    maps) has nothing to come back to: its relocalization's trial holds no replaced EKF."""
     from localization.filtering.belief import BeliefFilter
     from tests.localization.conftest import make_env
 
@@ -198,4 +198,57 @@ def test_a_start_off_the_maps_relocalizes_without_a_trial(localizer, drive):
     f = BeliefFilter(localizer, env.unwrapped.motion_model)
     env.close()
     assert f.reset(W[0] + 100.0 * W.std(axis=0)) == "out_of_domain"
-    assert f.step(controls[0], W[1])[1] == "relocalized" and f._trial is None
+    assert f.step(controls[0], W[1])[1] == "relocalized" and f._trial["ekf"] is None
+
+
+def _start_from(localizer, drive, first: int, steps: int):
+    """A BeliefFilter started from image ``first`` of the drive, then fed the drive's own
+    images 1..steps; returns the filter, its measurement statuses and its belief statuses
+    (after reset, then after each step)."""
+    from localization.filtering.belief import BeliefFilter
+    from tests.localization.conftest import make_env
+
+    images, _, controls = drive
+    W = localizer.transform(images)
+    env = make_env()
+    f = BeliefFilter(localizer, env.unwrapped.motion_model)
+    env.close()
+    f.reset(W[first])
+    statuses, beliefs = [], [f.belief_status]
+    for t in range(1, steps + 1):
+        statuses.append(f.step(controls[t - 1], W[t])[1])
+        beliefs.append(f.belief_status)
+    return f, statuses, beliefs
+
+
+def test_a_start_from_one_image_is_relocalizing_until_the_images_confirm_it(localizer, drive):
+    """psi* of the first image is a guess: the belief is "relocalizing" until CONFIRM_STEPS
+    measurements since its last (re)start were accepted (this small map's first psi* is
+    0.75 m off, gated, and the belief starts again at a later image), then "tracking"."""
+    from localization.filtering.belief import CONFIRM_STEPS, TRIAL_STEPS
+
+    _, poses, _ = drive
+    n = 4 * TRIAL_STEPS
+    f, statuses, beliefs = _start_from(localizer, drive, 0, n)
+    last = max((t for t, s in enumerate(statuses) if s == "relocalized"), default=-1)
+    accepted = np.cumsum([s == "accepted" for s in statuses[last + 1:]])
+    confirmed = last + 1 + int(np.searchsorted(accepted, CONFIRM_STEPS))
+    assert beliefs[0] == "relocalizing" and confirmed < n, statuses
+    assert set(beliefs[:confirmed + 1]) == {"relocalizing"}, beliefs
+    assert set(beliefs[confirmed + 1:]) == {"tracking"}, beliefs
+    assert "reverted" not in statuses and f._trial is None
+    assert np.hypot(*(f.x[:2] - poses[n][:2])) < 0.5
+
+
+def test_a_start_at_a_look_alike_starts_again_at_a_later_image(localizer, drive):
+    """The first image's psi* is a place 12 m on (a look-alike); the images after it are the
+    robot's own and are gated there: within TRIAL_STEPS measured steps the belief starts
+    again at the current image's psi*, long before the 50-step restart."""
+    from localization.filtering.belief import TRIAL_STEPS
+
+    _, poses, _ = drive
+    n = 4 * TRIAL_STEPS
+    f, statuses, beliefs = _start_from(localizer, drive, 120, n)
+    assert "relocalized" in statuses[:TRIAL_STEPS], statuses
+    assert np.hypot(*(f.x[:2] - poses[n][:2])) < 0.5
+    assert beliefs[-1] == "tracking"
