@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from sklearn.decomposition import PCA
 
-__all__ = ["fit_pca", "pca_from_state", "pca_state"]
+__all__ = ["fit_pca", "pca_from_state", "pca_project", "pca_state"]
 
 _PCA_ARRAYS = ("components_", "mean_", "explained_variance_", "explained_variance_ratio_",
                "singular_values_")
@@ -47,3 +47,17 @@ def fit_pca(x: np.ndarray, n_components: int, whiten: bool, random_state: int | 
     for name in _PCA_ARRAYS:  # one dtype and memory layout, so a reloaded PCA is bit-identical
         setattr(pca, name, np.ascontiguousarray(getattr(pca, name), dtype=np.float64))
     return pca
+
+
+def pca_project(pca: PCA, x: np.ndarray) -> np.ndarray:
+    """``pca.transform(x)`` for a dense 2-D float array the feature extractor made itself
+    (so scikit-learn's input checks, 0.45 ms of a 6 ms filter step, are skipped): the same
+    operations in the same order, ``x C^T - mean C^T``, divided by the clipped
+    ``sqrt(explained_variance_)`` when whitening."""
+    out = x @ pca.components_.T
+    out -= pca.mean_.reshape(1, -1) @ pca.components_.T
+    if pca.whiten:
+        scale = np.sqrt(pca.explained_variance_)
+        scale[scale < np.finfo(scale.dtype).eps] = np.finfo(scale.dtype).eps
+        out /= scale
+    return out

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from localization._validation import check_choice, check_int
-from localization.features._pca import fit_pca, pca_from_state, pca_state
+from localization.features._pca import fit_pca, pca_from_state, pca_project, pca_state
 from localization.features.base import FeatureExtractor
 
 __all__ = ["NORMALIZATIONS", "PixelPCA", "normalize_pixels"]
@@ -114,7 +114,7 @@ class PixelPCA(FeatureExtractor):
     def _transform(self, images: np.ndarray) -> np.ndarray:
         out = np.empty((len(images), self._n_out()), dtype=np.float64)
         for s in range(0, len(images), 1024):  # bounds the float64 temporaries of PCA
-            out[s:s + 1024] = self.pca_.transform(self._pixels(images[s:s + 1024]))
+            out[s:s + 1024] = pca_project(self.pca_, self._pixels(images[s:s + 1024]))
         return out
 
     def _state_arrays(self) -> dict[str, np.ndarray]:

@@ -391,6 +391,12 @@ def chi2_band(dof: int, n: int, prob: float = 0.95) -> tuple[float, float]:
     """
     if dof < 1 or n < 1 or not 0.0 < prob < 1.0:
         raise ValueError(f"need dof >= 1, n >= 1, 0 < prob < 1; got {dof}, {n}, {prob}")
+    return _chi2_band(int(dof), int(n), float(prob))
+
+
+@lru_cache(maxsize=256)
+def _chi2_band(dof: int, n: int, prob: float) -> tuple[float, float]:
+    """:func:`chi2_band`'s quantiles (cached: the divergence monitor asks every step)."""
     lo, hi = chi2.ppf([(1.0 - prob) / 2.0, (1.0 + prob) / 2.0], n * dof) / n
     return float(lo), float(hi)
 

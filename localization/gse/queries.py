@@ -6,6 +6,7 @@ with the recovery map, psi*(w) = g_v(r*(w)) and Phi*(theta) = g_u(R*(theta))
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -27,6 +28,7 @@ class GSEQueryMixin:
     w_scale_: Array
     theta_scale_: Array
     embedding_: Array
+    _memo: dict[str, tuple[bytes, Array, Array | None]]
 
     def _check_w(self, W: Array) -> Array:
         check_is_fitted(self, "gse_")
@@ -74,8 +76,27 @@ class GSEQueryMixin:
                     np.asarray(ind).reshape(len(Ws), -1))
         return brute_knn(self._ws, self._ws_sqn, Ws, k)
 
+    def _one_row(self, kind: str, X: Array, jacobian: bool,
+                 compute: Callable[[Array, bool], tuple[Array, Array | None]]
+                 ) -> tuple[Array, Array | None]:
+        """``compute(X, True)`` for a validated single row ``X``, remembered for the next
+        call with the same row: a filter step asks for r*(w) (its measurement) and psi*(w)
+        (its monitor) of one image, and for R*(x) and its Jacobian (h and H) at one pose.
+        The last row of each ``kind`` is kept (``_setup`` forgets them); copies go out."""
+        key = X.tobytes()
+        memo = self._memo.get(kind)
+        if memo is None or memo[0] != key:
+            memo = (key, *compute(X, True))
+            self._memo[kind] = memo
+        return memo[1].copy(), memo[2].copy() if jacobian else None
+
     def _r_star(self, W: Array, jacobian: bool) -> tuple[Array, Array | None]:
         W = self._check_w(W)
+        if len(W) == 1:
+            return self._one_row("w", W, jacobian, self._r_star_rows)
+        return self._r_star_rows(W, jacobian)
+
+    def _r_star_rows(self, W: Array, jacobian: bool) -> tuple[Array, Array | None]:
         Ws = (W - self.w_mean_) / self.w_scale_
         ind = self._query_w(Ws, self.jr_neighbors_)[1]
         mask = self._mask(ind)
@@ -89,7 +110,13 @@ class GSEQueryMixin:
         return r, J
 
     def _R_star(self, Theta: Array, jacobian: bool) -> tuple[Array, Array | None]:
-        Theta = self._check_theta(Theta).copy()
+        Theta = self._check_theta(Theta)
+        if len(Theta) == 1:
+            return self._one_row("theta", Theta, jacobian, self._R_star_rows)
+        return self._R_star_rows(Theta, jacobian)
+
+    def _R_star_rows(self, Theta: Array, jacobian: bool) -> tuple[Array, Array | None]:
+        Theta = Theta.copy()
         for c in self._per:
             Theta[:, c] = wrap_angle(Theta[:, c])
         _, ind = self._zv_tree.query(self._lift(Theta), k=self.jr_neighbors_)

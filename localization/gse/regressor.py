@@ -386,6 +386,7 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         self._zv = np.ascontiguousarray(self.gse_.Z_[:, m:])
         self._zv_tree = cKDTree(self._zv)  # pose space is low-dimensional
         self.embedding_ = self.gse_.embedding_
+        self._memo = {}  # the last single-row query of r* and R* (queries.GSEQueryMixin)
 
     # --------------------------------------------------------------- persistence
     def save(self, path: str | Path) -> None:

@@ -63,19 +63,36 @@ def check_2d(X: object, name: str, n_cols: int | None = None) -> Array:
 
     For arrays that are not an estimator's ``X`` (poses, representations, cuts).
     """
-    X = _validated(lambda: check_array(X, dtype=np.float64, order="C", ensure_all_finite=False,
-                                       input_name=name), X, name)
+    if _ready(X, None):
+        X = _check_finite(X, name)  # type: ignore[arg-type]
+    else:
+        X = _validated(lambda: check_array(X, dtype=np.float64, order="C",
+                                           ensure_all_finite=False, input_name=name), X, name)
     if n_cols is not None and X.shape[1] != n_cols:
         raise ValueError(f"{name} has {X.shape[1]} columns, expected {n_cols} (as in fit)")
     return X
+
+
+def _ready(X: object, n_cols: int | None, min_rows: int = 1) -> bool:
+    """``X`` is already what validation returns: a float64, C-ordered 2-D ndarray with
+    ``n_cols`` columns (any if None) and at least ``min_rows`` rows (a filter's one image or
+    pose per step: scikit-learn's checks cost more than the query)."""
+    return (type(X) is np.ndarray and X.dtype == np.float64 and X.ndim == 2
+            and X.flags.c_contiguous and X.shape[0] >= min_rows
+            and (n_cols is None or X.shape[1] == n_cols))
 
 
 def validate_X(estimator: Any, X: object, name: str = "X", *, reset: bool,
                ensure_min_samples: int = 1) -> Array:
     """An estimator's 2-D input through ``validate_data`` (float64, C order, finite).
 
-    ``reset=True`` (fit) records ``n_features_in_``; ``reset=False`` checks it.
+    ``reset=True`` (fit) records ``n_features_in_``; ``reset=False`` checks it (an input
+    that is already a float64 C-ordered array of that width, to an estimator fitted without
+    feature names, is only checked to be finite).
     """
+    if (not reset and not hasattr(estimator, "feature_names_in_")
+            and _ready(X, getattr(estimator, "n_features_in_", -1), ensure_min_samples)):
+        return _check_finite(X, name)  # type: ignore[arg-type]
     return _validated(lambda: validate_data(estimator, X, reset=reset, dtype=np.float64,
                                             order="C", ensure_all_finite=False,
                                             ensure_min_samples=ensure_min_samples), X, name)

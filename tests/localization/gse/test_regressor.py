@@ -168,6 +168,29 @@ def test_predictions_are_samplewise(pose3):
     assert model.features_jacobian(Tt[:5]).shape == (5, 30, 3)
 
 
+def test_a_repeated_single_row_query_is_answered_once_and_copied(pose3):
+    """A filter step asks r* (its measurement) and psi* (its monitor) of one image, and R*
+    and its Jacobian (h and H) at one pose: the last row of each is remembered, the answers
+    equal the uncached ones, a caller changing an answer changes no later one, and a refit
+    forgets them."""
+    W, T, Wt, Tt, _, model = pose3
+    w, theta = Wt[3:4], Tt[3:4]
+    r, J = model.embed(w), model.embed_jacobian(w)
+    np.testing.assert_array_equal(r, model._r_star_rows(w, False)[0])
+    np.testing.assert_array_equal(J, model._r_star_rows(w, True)[1])
+    np.testing.assert_allclose(model.predict(w), model.predict(Wt[3:5])[:1], atol=1e-12)
+    R = model.embed_pose(theta)
+    np.testing.assert_array_equal(R, model._R_star_rows(theta, False)[0])
+    np.testing.assert_array_equal(model.embed_pose_jacobian(theta),
+                                  model._R_star_rows(theta, True)[1])
+    r[:] = 99.0
+    np.testing.assert_array_equal(model.embed(w), model._r_star_rows(w, False)[0])
+    refit = GSERegressor(n_neighbors=20, periodic=(2,)).fit(W[:1500], T[:1500])
+    refit.embed(w)
+    refit.fit(W, T)
+    np.testing.assert_array_equal(refit.embed(w), model.embed(w))
+
+
 def test_save_load_roundtrip_and_corruption(pose3, tmp_path):
     _W, _T, Wt, Tt, _, model = pose3
     path = tmp_path / "gse.npz"
