@@ -251,9 +251,8 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         seed = check_seed(seed, "seed", optional=True)
         obs, info = self.env.reset(seed=seed, options=options)
         w = self.localizer.transform(obs["image"])[0]
-        if isinstance(self.belief, ParticleBelief):
-            if seed is not None and not self._seeded:
-                self.belief.rng = np.random.default_rng([seed, 0x5EED])
+        if isinstance(self.belief, ParticleBelief) and seed is not None and not self._seeded:
+            self.belief.rng = np.random.default_rng([seed, 0x5EED])
         status = self.belief.reset(w, mode=localize)
         if isinstance(self.belief, BeliefFilter):
             self.belief_status = self.belief.belief_status  # a start from one image: relocalizing

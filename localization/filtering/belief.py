@@ -54,13 +54,12 @@ from localization.filtering.ekf import (
     check_motion_model,
 )
 from localization.filtering.localizer_protocol import Localizer, check_localizer
+from localization.filtering.restart_trial import CONFIRM_STEPS, RestartTrial
 from localization.geometry import Array
 
 STATUSES = ("initial", "accepted", "gated", "out_of_domain", "relocalized", "reverted")
 NOISE_MODELS = ("global", "heteroscedastic")
 RESET_MODES = ("image", "global")
-CONFIRM_STEPS = 3  # accepted measurements after a restart before the status is "tracking"
-TRIAL_STEPS = 5  # a restart must have CONFIRM_STEPS accepted within these, or undo
 LOST_AFTER_MISSES = 5  # steps in a row without an accepted measurement: "doubtful" or "lost"
 #: ... "lost" when P is also this wide (position std in m along its widest axis, heading std in
 #: rad); else "doubtful": dead reckoning through unfamiliar views at a corner is not being lost
@@ -152,7 +151,7 @@ class BeliefFilter:
         self._confirm = 0
         self._forced = self._lost_now = self._doubtful_now = False
         self._placed = False  # True once the belief came from an image or x0 (not the prior)
-        self._trial: dict[str, Any] | None = None  # the EKF a restart replaced, on trial
+        self._trial: RestartTrial | None = None  # a restart on trial
 
     @property
     def x(self) -> Array:
@@ -307,7 +306,7 @@ class BeliefFilter:
     def _put_on_trial(self, replaced: PoseEKF | None, misses: int) -> None:
         """The restarted EKF is on trial against ``replaced`` (None: nothing to come back to),
         which had ``misses`` steps without an accepted measurement (:meth:`_on_trial`)."""
-        self._trial = {"ekf": replaced, "misses": misses, "steps": 0, "accepted": 0}
+        self._trial = RestartTrial(replaced, misses)
 
     def _watch(self, u: ArrayLike, w: Array, nis: float, status: str) -> str:
         """Feed the divergence monitor; restart from the proposals when it says so."""
@@ -342,42 +341,37 @@ class BeliefFilter:
         return ok or forced  # an unknown start takes the agreed place either way
 
     def _on_trial(self, u: ArrayLike, w: Array, status: str) -> str:
-        """A (re)start on trial (from an image at the start, by the monitor or after
-        ``relocalize_after`` misses): unless it has ``CONFIRM_STEPS`` accepted measurements
-        within ``TRIAL_STEPS`` steps with a measurement (out-of-domain steps do not count), the
-        EKF it replaced, which runs on beside it (same F, same measurements), comes back
-        ("reverted"): a run of aliased images can agree on a wrong place, and the images that
-        follow do not. With nothing to come back to (a start from one image), the belief
+        """One step of a (re)start on trial (:mod:`~localization.filtering.restart_trial`):
+        the EKF it replaced runs on beside it; once the trial fails, that EKF comes back
+        ("reverted"), or with nothing to come back to (a start from one image) the belief
         starts again at the current image's psi* ("relocalized"): on tuning city 13 a first
         image's psi* 11 m off stood for 78 steps until the 50-step restart."""
         trial = self._trial
         assert trial is not None and self.ekf is not None
-        if trial["ekf"] is not None:
-            self._step_replaced(trial, u, w)
-        trial["steps"] += status != "out_of_domain"  # an image off the maps tells nothing
-        trial["accepted"] += status == "accepted"
-        if trial["accepted"] >= CONFIRM_STEPS or trial["steps"] < TRIAL_STEPS:
-            self._trial = None if trial["accepted"] >= CONFIRM_STEPS else trial
+        if trial.replaced is not None:
+            trial.misses = 0 if self._step_replaced(trial.replaced, u, w) else trial.misses + 1
+        trial.record(status)
+        if not (trial.confirmed or trial.failed):
             return status
         self._trial = None
-        if trial["ekf"] is None:
+        if trial.confirmed:
+            return status
+        if trial.replaced is None:
             return "relocalized" if self._from_image(w) else status
-        self.ekf, self.misses, self.gated = trial["ekf"], trial["misses"], 0
+        self.ekf, self.misses, self.gated = trial.replaced, trial.misses, 0
         self.belief_status = "tracking"
         if self.monitor is not None:
             self.monitor.clear()
         return "reverted"
 
-    def _step_replaced(self, trial: dict[str, Any], u: ArrayLike, w: Array) -> None:
-        """Predict and update the EKF on trial's replaced belief; count its misses."""
-        old: PoseEKF = trial["ekf"]
+    def _step_replaced(self, old: PoseEKF, u: ArrayLike, w: Array) -> bool:
+        """Predict and update the EKF a restart replaced; whether it accepted the image."""
         old.predict(self.gain * np.asarray(u, dtype=np.float64))
         z, model = self._measurement(old.x, w)
         try:
-            took = bool(np.all(np.isfinite(z))) and old.update(z, model).accepted
+            return bool(np.all(np.isfinite(z))) and old.update(z, model).accepted
         except OutOfDomainError:
-            took = False
-        trial["misses"] = 0 if took else trial["misses"] + 1
+            return False
 
     def _update_status(self, status: str) -> None:
         """"relocalizing" until ``CONFIRM_STEPS`` accepted measurements; otherwise "lost"

@@ -103,7 +103,8 @@ def _tracking_then_trial(localizer, drive, incumbent_error: float):
     divergence restart leaves it; the replaced EKF is ``incumbent_error`` m from where the
     running one is (0: the running one is moved 3 m off instead). Returns the filter and
     the statuses of the next 3 * TRIAL_STEPS steps."""
-    from localization.filtering.belief import TRIAL_STEPS, BeliefFilter
+    from localization.filtering.belief import BeliefFilter
+    from localization.filtering.restart_trial import TRIAL_STEPS
 
     images, poses, controls = drive
     W = localizer.transform(images)
@@ -169,7 +170,7 @@ def test_a_relocalization_at_a_look_alike_is_undone(localizer, drive):
     image's psi*; that image is from 12 m on (a look-alike), the images after it are the
     robot's own again: they are gated at the restart and fit the belief that coasted, which
     comes back ("reverted") instead of staying 12 m off."""
-    from localization.filtering.belief import TRIAL_STEPS
+    from localization.filtering.restart_trial import TRIAL_STEPS
 
     images, poses, controls = drive
     W = localizer.transform(images)
@@ -198,7 +199,7 @@ def test_a_start_off_the_maps_relocalizes_with_nothing_to_come_back_to(localizer
     f = BeliefFilter(localizer, env.unwrapped.motion_model)
     env.close()
     assert f.reset(W[0] + 100.0 * W.std(axis=0)) == "out_of_domain"
-    assert f.step(controls[0], W[1])[1] == "relocalized" and f._trial["ekf"] is None
+    assert f.step(controls[0], W[1])[1] == "relocalized" and f._trial.replaced is None
 
 
 def _start_from(localizer, drive, first: int, steps: int):
@@ -225,7 +226,7 @@ def test_a_start_from_one_image_is_relocalizing_until_the_images_confirm_it(loca
     """psi* of the first image is a guess: the belief is "relocalizing" until CONFIRM_STEPS
     measurements since its last (re)start were accepted (this small map's first psi* is
     0.75 m off, gated, and the belief starts again at a later image), then "tracking"."""
-    from localization.filtering.belief import CONFIRM_STEPS, TRIAL_STEPS
+    from localization.filtering.restart_trial import CONFIRM_STEPS, TRIAL_STEPS
 
     _, poses, _ = drive
     n = 4 * TRIAL_STEPS
@@ -244,7 +245,7 @@ def test_a_start_at_a_look_alike_starts_again_at_a_later_image(localizer, drive)
     """The first image's psi* is a place 12 m on (a look-alike); the images after it are the
     robot's own and are gated there: within TRIAL_STEPS measured steps the belief starts
     again at the current image's psi*, long before the 50-step restart."""
-    from localization.filtering.belief import TRIAL_STEPS
+    from localization.filtering.restart_trial import TRIAL_STEPS
 
     _, poses, _ = drive
     n = 4 * TRIAL_STEPS
