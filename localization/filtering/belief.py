@@ -19,7 +19,9 @@ accepted measurement the belief restarts from psi* of the current image, as at t
 on trial: the belief it replaced runs on beside it and comes back unless the restart has
 ``CONFIRM_STEPS`` accepted measurements within ``TRIAL_STEPS`` measured steps (one image's
 psi* may be a look-alike place, and a belief coasting through views off the maps may be
-right).
+right). The start from the first image is on trial too ("relocalizing"), with nothing to come
+back to: unconfirmed, it starts again at a later image's psi*
+(:mod:`~localization.filtering.restart_trial`).
 Five steps without one make it "doubtful" while P is narrow (coasting on F through views
 off the maps, e.g. a turn at a corner on a lane-trained map) and "lost" once P is too wide
 to steer on.
@@ -294,8 +296,8 @@ class BeliefFilter:
     def _relocalize(self, w: Array, status: str) -> str:
         """Restart at psi*(w) after ``relocalize_after`` misses, on trial against the belief it
         replaces (:meth:`_on_trial`): a belief coasting through views off the maps may be
-        right, and one image's psi* may be a look-alike place. No trial for a belief that
-        was never placed (a start off the maps)."""
+        right, and one image's psi* may be a look-alike place. Nothing to come back to for a
+        belief that was never placed (a start off the maps) or is itself still on trial."""
         prior, misses, keep = self.ekf, self.misses, self._placed and self._trial is None
         if not self._from_image(w):
             return status
