@@ -13,7 +13,8 @@ come back to, the belief starts again at a later image's psi*.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+
+from localization.filtering.ekf import PoseEKF
 
 __all__ = ["CONFIRM_STEPS", "TRIAL_STEPS", "RestartTrial"]
 
@@ -35,7 +36,7 @@ class RestartTrial:
         The restart's steps with a measurement, and its accepted ones.
     """
 
-    replaced: Any
+    replaced: PoseEKF | None
     misses: int
     steps: int = 0
     accepted: int = 0

@@ -28,7 +28,8 @@ class GSEQueryMixin:
     w_scale_: Array
     theta_scale_: Array
     embedding_: Array
-    _memo: dict[str, tuple[bytes, Array, Array | None]]
+    out_of_domain: str
+    _memo: dict[str, tuple[tuple[bytes, str], Array, Array | None]]
 
     def _check_w(self, W: Array) -> Array:
         check_is_fitted(self, "gse_")
@@ -82,8 +83,10 @@ class GSEQueryMixin:
         """``compute(X, True)`` for a validated single row ``X``, remembered for the next
         call with the same row: a filter step asks for r*(w) (its measurement) and psi*(w)
         (its monitor) of one image, and for R*(x) and its Jacobian (h and H) at one pose.
-        The last row of each ``kind`` is kept (``_setup`` forgets them); copies go out."""
-        key = X.tobytes()
+        The last row of each ``kind`` is kept (``_setup`` forgets them) with the
+        ``out_of_domain`` setting it was answered under (the one option read at query time);
+        copies go out."""
+        key = (X.tobytes(), self.out_of_domain)
         memo = self._memo.get(kind)
         if memo is None or memo[0] != key:
             memo = (key, *compute(X, True))

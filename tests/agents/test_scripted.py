@@ -6,7 +6,14 @@ import pytest
 
 import envs  # noqa: F401  (registers the env)
 from agents.observations import NavigationFeatures, to_body_frame
-from agents.scripted import ScriptedAgent, check_belief_observation, pure_pursuit
+from agents.scripted import (
+    LOOK_TOLERANCE,
+    ScriptedAgent,
+    check_belief_observation,
+    pure_pursuit,
+    street_axis,
+)
+from localization.geometry import wrap_angle
 
 TINY_COV = np.array([1e-4, 0, 0, 1e-4, 0, 1e-4])
 
@@ -143,7 +150,9 @@ def test_agent_does_not_steer_on_a_lost_belief() -> None:
     assert np.array_equal(tracking, agent.act(belief))
     assert tracking[0] > 0
     lost = agent.act(belief, {"belief_status": "lost"})
-    assert lost[0] == 0.0 and abs(lost[1]) in (0.0, pytest.approx(0.5))  # see the next test
+    to_axis = float(wrap_angle(street_axis(pose[2]) - pose[2]))  # then looks (next test)
+    turn = 0.0 if abs(to_axis) <= LOOK_TOLERANCE else np.copysign(0.5, to_axis)
+    np.testing.assert_allclose(lost, [0.0, turn])
     for status in ("doubtful", "relocalizing", "ambiguous"):
         slow = agent.act(belief, {"belief_status": status})
         assert slow[0] == pytest.approx(0.5 * tracking[0]) and slow[1] == pytest.approx(tracking[1])

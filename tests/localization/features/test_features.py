@@ -256,3 +256,18 @@ def test_pixel_pca_mask_uses_only_the_masked_pixels_and_round_trips():
     assert np.array_equal(g.transform(images), f.transform(images))
     with pytest.raises(ValueError, match="mask"):
         PixelPCA(mask=np.ones((8, 8), bool)).fit(images)
+
+
+@pytest.mark.parametrize("whiten", [False, True])
+def test_pca_projection_is_scikit_learns_transform_bit_for_bit(whiten):
+    """PixelPCA projects with ``pca_project`` (scikit-learn's formula without its input
+    checks, for speed): the numbers must stay those of ``PCA.transform``, also on float32
+    pixels and with a component of (almost) zero variance."""
+    from localization.features._pca import fit_pca, pca_project
+
+    rng = np.random.default_rng(0)
+    x = rng.random((200, 40), dtype=np.float32)
+    x[:, 1] = x[:, 0]  # rank-deficient: the last component has (almost) no variance
+    pca = fit_pca(x, 40, whiten, 0)
+    q = rng.random((7, 40), dtype=np.float32)
+    np.testing.assert_array_equal(pca_project(pca, q), pca.transform(q))

@@ -185,6 +185,12 @@ def test_a_repeated_single_row_query_is_answered_once_and_copied(pose3):
                                   model._R_star_rows(theta, True)[1])
     r[:] = 99.0
     np.testing.assert_array_equal(model.embed(w), model._r_star_rows(w, False)[0])
+    far = Wt[:1] + 100.0  # out of the domain: remembered with the setting it was asked under
+    model.set_params(out_of_domain="nan")
+    assert np.isnan(model.embed(far)).all()
+    model.set_params(out_of_domain="raise")
+    with pytest.raises(ValueError, match="outside"):
+        model.embed(far)
     refit = GSERegressor(n_neighbors=20, periodic=(2,)).fit(W[:1500], T[:1500])
     refit.embed(w)
     refit.fit(W, T)
