@@ -118,6 +118,9 @@ class RobustnessConfig:
         "help": "episode truncation (steps); 1.5x the agents' default 400: the longest "
                 "street paths of a 20 m city take the true-pose agent up to 375 steps, so at "
                 "400 any slow-down times out (success within 400 is reported beside it)"})
+    detect_divergence: bool = field(default=False, metadata={
+        "help": "the EKF rows' belief notices when it is lost (BeliefFilter's "
+                "detect_divergence, as in the agents benchmark); off: the plain EKF"})
     workers: int = field(default=1, metadata={"help": WORKERS_HELP})
     ray_address: str = field(default="", metadata={"help": RAY_ADDRESS_HELP})
     reuse_localizers: bool = field(default=False, metadata={
@@ -238,12 +241,22 @@ def _localizer(args: RobustnessConfig, city: int, condition: str) -> AppearanceL
 def make_env(args: RobustnessConfig, city: int, condition: str, source: str) -> gym.Env:
     """The pose env of one row: ``source`` under ``condition`` in ``city``."""
     loc = None if source == "oracle" else _localizer(args, city, condition)
-    kwargs: dict[str, Any] = {"filter": FILTERS[source]} if source in FILTERS else {}
     return make_pose_env("belief" if source in FILTERS else source, loc, scene_seed=city,
                          image_size=(args.image_size, args.image_size),
                          motion_noise=args.motion_noise, max_episode_steps=args.max_steps,
                          kidnap_at=(args.kidnap_at,) if condition == "kidnap" else (),
-                         conditions=None if condition in SPECIAL else condition, **kwargs)
+                         conditions=None if condition in SPECIAL else condition,
+                         **belief_options(args, source))
+
+
+def belief_options(args: RobustnessConfig, source: str) -> dict[str, Any]:
+    """The BeliefWrapper settings of a row's pose source (none for the image-free ones)."""
+    if source not in FILTERS:
+        return {}
+    options: dict[str, Any] = {"filter": FILTERS[source]}
+    if source == "ekf" and args.detect_divergence:
+        options["filter_options"] = {"detect_divergence": True}
+    return options
 
 
 def make_agent(args: RobustnessConfig, agent: str, source: str, city: Any) -> Any:
@@ -277,7 +290,9 @@ def run_robust_task(task: RobustTask) -> list[Episode]:
 def task_path(task: RobustTask) -> Path:
     """Where a task's episode records go (``<out>/robustness/episodes/``)."""
     name = (f"{task.agent}_{task.source}_{task.condition}_{task.city}_{task.seeds[0]}-"
-            f"{task.seeds[-1]}_{task.config.image_size}px_{task.config.max_steps}.json")
+            f"{task.seeds[-1]}_{task.config.image_size}px_{task.config.max_steps}"
+            f"{'_detect' if 'filter_options' in belief_options(task.config, task.source) else ''}"
+            ".json")
     return Path(task.config.out_dir) / "robustness" / "episodes" / name
 
 

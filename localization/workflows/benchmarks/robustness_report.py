@@ -114,6 +114,7 @@ def markdown(result: dict[str, Any]) -> str:
             f"steps, kidnap at step {a['kidnap_at']}; street-wide localizers: daylight "
             f"(PixelPCA, {a['n_train']} images) for nominal and kidnap, randomised conditions "
             f"({a['randomised_features']}, {a['n_train_randomised']} images) for the presets; "
+            f"{'EKF with divergence detection; ' if a.get('detect_divergence') else ''}"
             f"{result['seconds']:.0f} s ({result['fit_seconds']:.0f} s of fits).\n\n"
             "\"as nominal\": the source never sees an image, so its episodes under a lighting "
             "or camera preset are the nominal ones; \"(x in N)\": the share that reached the "

@@ -86,3 +86,24 @@ def test_parallel_episodes_equal_the_serial_run(tmp_path: Path) -> None:
     assert all(r["episodes"] == 2 for r in serial["summary"].values())
     assert json.loads((tmp_path / "bench_robustness.json").read_text())["targets"]
     assert "| traffic |" in (tmp_path / "bench_robustness.md").read_text()
+
+
+def test_detect_divergence_applies_to_the_ekf_rows_and_keys_their_records() -> None:
+    """``detect_divergence`` gives the EKF rows' belief its divergence monitor (and only
+    theirs), and their episode records a file of their own (a resume never mixes them)."""
+    from localization.workflows.benchmarks.robustness import (
+        RobustnessConfig,
+        RobustTask,
+        belief_options,
+        task_path,
+    )
+
+    plain, detect = RobustnessConfig(), RobustnessConfig(detect_divergence=True)
+    assert belief_options(plain, "ekf") == {"filter": "ekf"}
+    assert belief_options(detect, "ekf") == {"filter": "ekf",
+                                             "filter_options": {"detect_divergence": True}}
+    assert belief_options(detect, "particles") == {"filter": "particles"}
+    assert belief_options(detect, "oracle") == {}
+    names = {task_path(RobustTask(config, 21, "nominal", source, "scripted", (1, 2))).name
+             for config in (plain, detect) for source in ("ekf", "particles")}
+    assert len(names) == 3  # the particle rows' records are the same either way
