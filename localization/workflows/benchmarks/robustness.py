@@ -57,7 +57,12 @@ from agents.sources import make_pose_env
 from envs.conditions import PRESETS
 from localization.loading import load_localizer
 from localization.localizer import AppearanceLocalizer
-from localization.workflows.benchmarks.robustness_report import DEFAULT_STEPS, markdown, targets
+from localization.workflows.benchmarks.robustness_report import (
+    DEFAULT_STEPS,
+    HELD_OUT_CITIES,
+    markdown,
+    targets,
+)
 from localization.workflows.parallel import RAY_ADDRESS_HELP, WORKERS_HELP, map_tasks, worker_env
 from localization.workflows.tracking import fit_city_localizer
 
@@ -86,7 +91,7 @@ DEFAULT_CONDITIONS = ",".join([*SPECIAL, *(p for p in PRESETS if p != "default")
 class RobustnessConfig:
     """Settings of the robustness benchmark."""
 
-    cities: str = field(default="21,22", metadata={
+    cities: str = field(default=HELD_OUT_CITIES, metadata={
         "help": "comma-separated held-out scene seeds (never used to tune anything)"})
     conditions: str = field(default=DEFAULT_CONDITIONS, metadata={
         "help": "comma-separated: nominal, kidnap and appearance presets (envs.conditions)"})

@@ -8,10 +8,12 @@ from agents.evaluation import METRIC_COLUMNS, metric_cells
 from agents.sources import agent_episode_steps
 from envs.conditions import PRESETS
 
-__all__ = ["DEFAULT_STEPS", "TARGETS", "markdown", "targets"]
+__all__ = ["DEFAULT_STEPS", "HELD_OUT_CITIES", "TARGETS", "held_out_label", "markdown", "targets"]
 
 #: the agents' default episode limit in the default 20 m city (400 steps)
 DEFAULT_STEPS = agent_episode_steps(20.0)
+#: the benchmark's held-out cities: never used to choose anything
+HELD_OUT_CITIES = "21,22"
 
 #: issue 17's targets on these rows
 TARGETS = {"scripted_nominal": 0.98, "scripted_kidnap_particles": 0.90,
@@ -104,11 +106,20 @@ def metrics_table(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def held_out_label(cities: str) -> str:
+    """How the report names the cities: held out, or a tuning run on others."""
+    held = set(HELD_OUT_CITIES.split(","))
+    given = {c.strip() for c in cities.split(",")}
+    return "held out" if given <= held else \
+        f"not the held-out {HELD_OUT_CITIES}: a run for choosing settings"
+
+
 def markdown(result: dict[str, Any]) -> str:
     """The report: settings, the success matrix, every metric, the targets."""
     a = result["args"]
     head = (f"# Agents under nominal conditions, kidnapping, appearance presets and moving "
-            f"things\n\nCities {a['cities']} (held out), {a['image_size']}x{a['image_size']} "
+            f"things\n\nCities {a['cities']} ({held_out_label(a['cities'])}), "
+            f"{a['image_size']}x{a['image_size']} "
             f"perspective images, motion noise {a['motion_noise']}, {a['episodes']} episodes "
             f"per row and city (reset seeds {a['seed']}..), truncation at {a['max_steps']} "
             f"steps, kidnap at step {a['kidnap_at']}; street-wide localizers: daylight "

@@ -18,7 +18,9 @@ from localization.workflows.benchmarks.robustness import (
 )
 from localization.workflows.benchmarks.robustness_report import (
     DEFAULT_STEPS,
+    HELD_OUT_CITIES,
     _success_cell,
+    held_out_label,
     targets,
 )
 
@@ -28,6 +30,13 @@ def test_image_free_sources_skip_lighting_presets_only() -> None:
     assert not runs_condition("oracle", "night") and not runs_condition("dead_reckoning", "dusk")
     assert runs_condition("oracle", "traffic") and runs_condition("dead_reckoning", "kidnap")
     assert training_of("kidnap") == "daylight" and training_of("traffic") == "randomised"
+
+
+def test_the_report_calls_only_the_held_out_cities_held_out() -> None:
+    assert RobustnessConfig().cities == HELD_OUT_CITIES
+    assert held_out_label("21,22") == held_out_label(" 22") == "held out"
+    assert "not the held-out" in held_out_label("13,14")
+    assert "not the held-out" in held_out_label("21,15")
 
 
 def test_success_within_the_default_limit_counts_only_the_early_arrivals() -> None:
