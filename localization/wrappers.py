@@ -53,7 +53,7 @@ FILTERS = ("ekf", "particles")
 LOCALIZE = ("image", "global")
 #: filter_options each filter takes (the rest of its settings are BeliefWrapper's arguments)
 FILTER_OPTIONS = {
-    "ekf": ("detect_divergence", "alpha", "inflate_factor", "noise"),
+    "ekf": ("detect_divergence", "alpha", "inflate_factor", "noise", "free_space"),
     "particles": ("n_particles", "resample_threshold", "resample", "alpha", "alpha_slow",
                   "alpha_fast", "injection_ratio", "max_injection", "ambiguous_injection",
                   "n_neighbors", "proposal_noise", "global_proposal_fraction", "sample_free",
@@ -162,7 +162,10 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         ``detect_divergence`` (True: the EKF notices when it is lost and restarts where
         the images agree, method §13.1, or a dict of DivergenceMonitor settings; default
         False), ``alpha``,
-        ``inflate_factor``, ``noise`` ("heteroscedastic": R(x, w), method §15.4); for "particles" ParticleBelief's (``n_particles``, ...,
+        ``inflate_factor``, ``noise`` ("heteroscedastic": R(x, w), method §15.4),
+        ``free_space`` (the map against which a contact, ``info["collision"]``, can
+        contradict the belief: default ``env.unwrapped.city.free_mask``; None: contacts are
+        ignored); for "particles" ParticleBelief's (``n_particles``, ...,
         ``sample_free``: default poses along the map's streets, from
         ``env.unwrapped.city.street_graph()``; ``seed``: default from ``reset(seed=...)``).
 
@@ -205,6 +208,8 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         self.filter = filter
         mm = env.unwrapped.motion_model
         if filter == "ekf":
+            if "free_space" not in options and hasattr(env.unwrapped, "city"):
+                options["free_space"] = env.unwrapped.city.free_mask
             self.belief: BeliefFilter | ParticleBelief = BeliefFilter(
                 localizer, mm, measurement, gate_probability, relocalize_after,
                 inflate_after=inflate_after, **options)
@@ -267,8 +272,12 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         if self.mean is None:
             raise gym.error.ResetNeeded("call reset() before step()")
         obs, reward, terminated, truncated, info = self.env.step(action)
-        nis, status = self.belief.step(self._control(action),
-                                       self.localizer.transform(obs["image"])[0])
+        w = self.localizer.transform(obs["image"])[0]
+        if isinstance(self.belief, BeliefFilter):
+            nis, status = self.belief.step(self._control(action), w,
+                                           contact=bool(info.get("collision", False)))
+        else:
+            nis, status = self.belief.step(self._control(action), w)
         self._publish(info, nis if self.filter == "ekf" else np.nan, status)
         return self.observation(obs), reward, terminated, truncated, info
 

@@ -23,8 +23,10 @@ right). The start from the first image is on trial too ("relocalizing"), with no
 back to: unconfirmed, it starts again at a later image's psi*
 (:mod:`~localization.filtering.restart_trial`).
 Five steps without one make it "doubtful" while P is narrow (coasting on F through views
-off the maps, e.g. a turn at a corner on a lane-trained map) and "lost" once P is too wide
-to steer on.
+off the maps, e.g. a turn at a corner on a lane-trained map) and "lost" once its position is
+too uncertain to steer on (the heading inflation alone never gets there), or for a while after
+a contact where the map (``free_space``) has room around the belief
+(:mod:`~localization.filtering.map_contact`).
 
 Divergence detection (``detect_divergence``, :mod:`localization.filtering.divergence`; off
 by default): one contradicting image or the window's chi-square
@@ -56,6 +58,12 @@ from localization.filtering.ekf import (
     check_motion_model,
 )
 from localization.filtering.localizer_protocol import Localizer, check_localizer
+from localization.filtering.map_contact import (
+    CONTACT_LOST_STEPS,
+    FreeSpace,
+    check_free_space,
+    contact_contradicts,
+)
 from localization.filtering.restart_trial import CONFIRM_STEPS, RestartTrial
 from localization.geometry import Array
 
@@ -66,8 +74,11 @@ LOST_AFTER_MISSES = 5  # steps in a row without an accepted measurement: "doubtf
 #: ... "lost" when P is also this wide (position std in m along its widest axis, heading std in
 #: rad); else "doubtful": dead reckoning through unfamiliar views at a corner is not being lost
 LOST_POSITION_STD = 0.5
-LOST_HEADING_STD = 0.4
 MAX_HEADING_STD = 0.5  # rad: heading inflation stops there
+#: wider than the inflation makes it: rejected images alone make the belief "doubtful", and it
+#: drives on (tuning cities 13-16: "lost" at 0.4 rad stopped a belief 0.1 m right to turn in
+#: place into views off the map until a restart jumped to a look-alike)
+LOST_HEADING_STD = 0.6
 
 
 class BeliefFilter:
@@ -99,6 +110,10 @@ class BeliefFilter:
         The measurement noise: one R per model, or R(x) scaled where the maps are weak
         (the localizer's ``measurement_model(..., noise="heteroscedastic")``; a localizer
         fitted with ``noise_folds >= 2``).
+    free_space : callable, optional
+        The map: ``free_space(points (n, 2), margin) -> (n,) bool`` (e.g.
+        ``city.free_mask``); with it a contact (``step(..., contact=True)``) where the map has
+        room around the belief makes it "lost" for a while. None: contacts are ignored.
 
     Attributes
     ----------
@@ -117,7 +132,7 @@ class BeliefFilter:
                  alpha: ArrayLike | None = None, inflate_after: int | None = 3,
                  inflate_factor: float = 2.0,
                  detect_divergence: bool | dict[str, Any] = False,
-                 noise: str = "global") -> None:
+                 noise: str = "global", free_space: FreeSpace | None = None) -> None:
         check_localizer(localizer)
         check_choice(noise, "noise", NOISE_MODELS)
         motion_model = check_motion_model(motion_model)
@@ -154,6 +169,8 @@ class BeliefFilter:
         self._forced = self._lost_now = self._doubtful_now = False
         self._placed = False  # True once the belief came from an image or x0 (not the prior)
         self._trial: RestartTrial | None = None  # a restart on trial
+        self.free_space = check_free_space(free_space)
+        self._bumped = 0  # steps left "lost" after a contact that contradicts the belief
 
     @property
     def x(self) -> Array:
@@ -200,7 +217,7 @@ class BeliefFilter:
     def _start(self, x0: ArrayLike, P0: ArrayLike) -> None:
         self.ekf = PoseEKF(self.motion_model, self._Q, x0, P0,
                            gate_probability=self.gate_probability)
-        self.misses = self.gated = 0
+        self.misses = self.gated = self._bumped = 0
         self._confirm, self._forced, self._placed = 0, False, True
         if self.monitor is not None:
             self.monitor.clear()
@@ -255,8 +272,12 @@ class BeliefFilter:
             return "initial"
         return "out_of_domain"
 
-    def step(self, u: ArrayLike, w: ArrayLike) -> tuple[float, str]:
+    def step(self, u: ArrayLike, w: ArrayLike, contact: bool = False) -> tuple[float, str]:
         """Predict with the commanded control ``u`` (2,), update with the new features ``w``.
+
+        ``contact``: the robot touched something this step (``info["collision"]``); with
+        ``free_space``, a contact where the map has room around the belief makes it "lost"
+        for ``CONTACT_LOST_STEPS`` steps (:mod:`~localization.filtering.map_contact`).
 
         Returns
         -------
@@ -290,6 +311,10 @@ class BeliefFilter:
             status = self._on_trial(u, w, status)
         elif self.monitor is not None:
             status = self._watch(u, w, nis, status)
+        self._bumped = max(self._bumped - 1, 0)
+        if contact and self.free_space is not None and contact_contradicts(
+                self.free_space, self.ekf.x, self.ekf.P):
+            self._bumped = CONTACT_LOST_STEPS
         self._update_status(status)
         return nis, status
 
@@ -360,7 +385,7 @@ class BeliefFilter:
             return status
         if trial.replaced is None:
             return "relocalized" if self._from_image(w) else status
-        self.ekf, self.misses, self.gated = trial.replaced, trial.misses, 0
+        self.ekf, self.misses, self.gated, self._bumped = trial.replaced, trial.misses, 0, 0
         self.belief_status = "tracking"
         if self.monitor is not None:
             self.monitor.clear()
@@ -379,10 +404,10 @@ class BeliefFilter:
         """"relocalizing" until ``CONFIRM_STEPS`` accepted measurements; otherwise "lost"
         while the monitor says so, or after ``LOST_AFTER_MISSES`` steps in a row without an
         accepted measurement once P is wider than ``LOST_POSITION_STD`` /
-        ``LOST_HEADING_STD`` (heading inflation gets there after a few rejected images);
-        "doubtful" after those misses while P is still narrow (coasting on F through views
-        off the maps) or on a step whose image alone contradicts the belief (the monitor's
-        ``doubt_nis``); else "tracking"."""
+        ``LOST_HEADING_STD`` (wider than the heading inflation makes it), or after a
+        contact that contradicts it; "doubtful" after those misses while P is still narrow
+        (coasting on F through views off the maps) or on a step whose image alone
+        contradicts the belief (the monitor's ``doubt_nis``); else "tracking"."""
         if status == "relocalized":
             return
         if status == "reverted":
@@ -394,7 +419,7 @@ class BeliefFilter:
                 self.belief_status = "tracking"
             return
         missing = self.misses >= LOST_AFTER_MISSES
-        lost = self._lost_now or (missing and self._wide())
+        lost = self._lost_now or (missing and self._wide()) or self._bumped > 0
         self.belief_status = "lost" if lost else "doubtful" if (
             self._doubtful_now or missing) else "tracking"
 

@@ -138,31 +138,51 @@ def test_a_restart_the_images_confirm_stands(localizer, drive):
     assert np.hypot(*(f.x[:2] - truth[:2])) < 0.5
 
 
-def test_misses_are_doubt_while_p_is_narrow_and_lost_once_it_is_wide(localizer, drive):
-    """Images off the maps tell nothing: coasting on F the EKF is "doubtful" (the agent
-    slows down), not "lost" (the agent would stop and turn to views the maps do not know);
-    rejected images widen the heading until it is too uncertain to steer on: "lost"."""
-    from localization.filtering.belief import (
-        LOST_AFTER_MISSES,
-        LOST_HEADING_STD,
-        BeliefFilter,
-    )
+def _coasting(localizer, drive, **options):
+    """A BeliefFilter fed 2 * LOST_AFTER_MISSES images off the maps after the drive's first,
+    then rejected images (from 12 m on) up to step 40: (filter, [(measurement status,
+    belief status, P)] of those steps)."""
+    from localization.filtering.belief import LOST_AFTER_MISSES, BeliefFilter
     from tests.localization.conftest import make_env
 
     images, poses, controls = drive
     W = localizer.transform(images)
     env = make_env()
-    f = BeliefFilter(localizer, env.unwrapped.motion_model)
+    f = BeliefFilter(localizer, env.unwrapped.motion_model, **options)
     env.close()
     f.reset(W[0], poses[0], P)
     off_map = W[0] + 100.0 * W.std(axis=0)  # features far from every training image
     for t in range(1, 2 * LOST_AFTER_MISSES):
         assert f.step(controls[t - 1], off_map)[1] == "out_of_domain"
     assert f.misses > LOST_AFTER_MISSES and f.belief_status == "doubtful"
-    assert np.sqrt(f.ekf.P[2, 2]) < LOST_HEADING_STD
-    statuses = [f.step(controls[t - 1], W[t + 120])[1] for t in range(2 * LOST_AFTER_MISSES, 40)]
-    assert statuses.count("gated") >= 0.9 * len(statuses), statuses  # images 12 m on
-    assert f.belief_status == "lost" and np.sqrt(f.ekf.P[2, 2]) > LOST_HEADING_STD
+    steps = []
+    for t in range(2 * LOST_AFTER_MISSES, 40):
+        status = f.step(controls[t - 1], W[t + 120])[1]
+        steps.append((status, f.belief_status, f.P))
+    return f, steps
+
+
+def test_misses_are_doubt_while_p_is_narrow_and_lost_once_it_is_wide(localizer, drive):
+    """Images off the maps tell nothing: coasting on F the EKF is "doubtful" (the agent
+    slows down and drives on), not "lost" (the agent would stop and turn to views the maps
+    do not know). Rejected images widen the heading as far as the inflation goes, and that
+    alone is still "doubtful"; once the position is too uncertain to steer on (driving on
+    an uncertain heading gets there) it is "lost"."""
+    from localization.filtering.belief import (
+        LOST_HEADING_STD,
+        LOST_POSITION_STD,
+        MAX_HEADING_STD,
+    )
+
+    _, steps = _coasting(localizer, drive)
+    assert [s for s, _, _ in steps].count("gated") >= 0.9 * len(steps)  # images 12 m on
+    assert MAX_HEADING_STD < LOST_HEADING_STD
+    for _, status, cov in steps:
+        wide = np.linalg.eigvalsh(cov[:2, :2])[-1] > LOST_POSITION_STD ** 2
+        assert status == ("lost" if wide else "doubtful"), (status, cov)
+    heading_std = [np.sqrt(cov[2, 2]) for _, status, cov in steps if status == "doubtful"]
+    assert max(heading_std) >= MAX_HEADING_STD  # the inflation's cap, still doubtful
+    assert steps[-1][1] == "lost"
 
 
 def test_a_relocalization_at_a_look_alike_is_undone(localizer, drive):

@@ -1,0 +1,114 @@
+"""A contact where the map has room contradicts the belief: "lost" for a while."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from localization.filtering.map_contact import (
+    CONTACT_CLEARANCE,
+    CONTACT_LOST_STEPS,
+    check_free_space,
+    contact_contradicts,
+)
+
+X = np.array([1.0, 2.0, 0.3])
+
+
+class Map:
+    """A free_space that answers ``free`` and records the margins it was asked about."""
+
+    def __init__(self, free: bool) -> None:
+        self.free, self.margins = free, []
+
+    def __call__(self, points: np.ndarray, margin: float) -> np.ndarray:
+        assert points.shape == (1, 2)
+        self.margins.append(margin)
+        return np.full(len(points), self.free)
+
+
+def test_a_contact_contradicts_only_where_the_map_has_room() -> None:
+    room, wall = Map(True), Map(False)
+    assert contact_contradicts(room, X, np.diag([0.0, 0.0, 0.1]))
+    assert not contact_contradicts(wall, X, np.diag([0.0, 0.0, 0.1]))
+    assert room.margins == [pytest.approx(CONTACT_CLEARANCE)]
+
+
+def test_the_room_needed_grows_with_the_position_uncertainty() -> None:
+    """Two standard deviations along the widest axis: a wide belief may be at a wall."""
+    room = Map(True)
+    contact_contradicts(room, X, np.array([[0.09, 0.0, 0.0], [0.0, 0.01, 0.0],
+                                           [0.0, 0.0, 1.0]]))
+    assert room.margins == [pytest.approx(CONTACT_CLEARANCE + 0.6)]
+
+
+def test_bad_maps_are_named() -> None:
+    with pytest.raises(TypeError, match="free_space must be None or a callable"):
+        check_free_space(np.ones(3))
+    assert check_free_space(None) is None
+    with pytest.raises(ValueError, match="one bool per point"):
+        contact_contradicts(lambda p, m: np.ones((2, 2), bool), X, np.eye(3))
+
+
+def _tracking(localizer, drive, free_space, steps: int = 60):
+    from localization.filtering.belief import BeliefFilter
+    from tests.localization.conftest import make_env
+
+    images, poses, controls = drive
+    W = localizer.transform(images)
+    env = make_env()
+    f = BeliefFilter(localizer, env.unwrapped.motion_model, free_space=free_space)
+    env.close()
+    f.reset(W[0], poses[0], np.diag([0.01, 0.01, 0.001]))
+    for t in range(1, steps):
+        f.step(controls[t - 1], W[t])
+    assert f.belief_status == "tracking"
+    return f, W, controls
+
+
+def test_a_contradicting_contact_makes_the_belief_lost_for_a_while(localizer, drive):
+    """Tracking, a bump where the map has room: "lost" (the agent stops and looks) for
+    CONTACT_LOST_STEPS steps though the images are accepted, then tracking again."""
+    f, W, controls = _tracking(localizer, drive, Map(True))
+    f.step(controls[59], W[60], contact=True)
+    statuses = [f.belief_status]
+    for t in range(61, 61 + CONTACT_LOST_STEPS):
+        statuses.append(f.step(controls[t - 1], W[t])[1] and f.belief_status)
+    assert statuses == ["lost"] * CONTACT_LOST_STEPS + ["tracking"], statuses
+
+
+@pytest.mark.parametrize("free_space", [Map(False), None], ids=["at a wall", "no map"])
+def test_a_contact_the_map_explains_or_without_a_map_changes_nothing(localizer, drive,
+                                                                      free_space):
+    f, W, controls = _tracking(localizer, drive, free_space)
+    x = f.x
+    f.step(controls[59], W[60], contact=True)
+    g, _, _ = _tracking(localizer, drive, free_space, steps=61)
+    assert f.belief_status == "tracking" and np.array_equal(f.x, g.x) and not np.array_equal(x, f.x)
+
+
+def test_the_wrapper_feels_contacts_against_the_city_by_default(localizer) -> None:
+    from localization.wrappers import BeliefWrapper
+    from tests.localization.conftest import make_env
+
+    env = make_env()
+    assert BeliefWrapper(env, localizer).belief.free_space == env.unwrapped.city.free_mask
+    off = BeliefWrapper(env, localizer, filter_options={"free_space": None})
+    assert off.belief.free_space is None
+    env.close()
+
+
+def test_the_wrapper_passes_the_bumper_to_the_belief(localizer) -> None:
+    """Driving straight on until the robot touches something: with a map that has room
+    everywhere, the contact makes the belief "lost" on that very step."""
+    from localization.wrappers import BeliefWrapper
+    from tests.localization.conftest import make_env
+
+    env = BeliefWrapper(make_env(), localizer, filter_options={"free_space": Map(True)})
+    env.reset(seed=0)
+    for _ in range(400):
+        _, _, terminated, truncated, info = env.step(np.array([0.9, 0.0]))
+        if info["collision"] or terminated or truncated:
+            break
+    env.close()
+    assert info["collision"] and info["belief_status"] == "lost"
