@@ -24,8 +24,8 @@ __all__ = ["CONTACT_CLEARANCE", "CONTACT_LOST_STEPS", "FreeSpace", "check_free_s
 #: around each point is free of buildings (``City.free_mask``)
 FreeSpace = Callable[[Array, float], Array]
 #: m of free space around the belief's mean (plus two position standard deviations) in which
-#: a contact contradicts it: the robot's radius (0.22 m) and 0.28 m of slack
-CONTACT_CLEARANCE = 0.5
+#: a contact contradicts it: the robot's radius (0.22 m) and 0.3 m of slack
+CONTACT_CLEARANCE = 0.52
 #: steps a contradicted belief stays "lost" (unless a restart replaces it first); then it drives
 #: on (tuning cities 13-16, 600 episodes each: "lost" until a restart reached 80.5 % of the
 #: kidnapped goals, 30 steps 85.5 %, 60 steps 86.0 %, with 3.3 / 4.4 / 3.8 contact steps per
