@@ -7,35 +7,20 @@ gains), then the chosen measurement model updates it with the new image's featur
 unless the NIS gate rejects the measurement or the GSE maps have no value there (the
 image or the predicted pose lies outside the training domain).
 
-Recovery: a gate that rejects the truth keeps rejecting it (a sudden heading kick of
-0.2 rad against a belief sure to 0.03 rad lost the robot on a held-out city). From the
-``inflate_after``-th rejection in a row on, the heading variance (row and column of P) is
-multiplied by ``inflate_factor`` each step, up to a standard deviation of
-``MAX_HEADING_STD``, so the gate widens for a heading error until the measurements are
-accepted again. Only the heading: inflating the position too let a burst of aliased
-measurements through (one moved a belief 2.5 m sideways). An isolated outlier (e.g. a
-corrupted image) changes nothing. After ``relocalize_after`` steps in a row without an
-accepted measurement the belief restarts from psi* of the current image, as at the start,
-on trial: the belief it replaced runs on beside it and comes back unless the restart has
-``CONFIRM_STEPS`` accepted measurements within ``TRIAL_STEPS`` measured steps (one image's
-psi* may be a look-alike place, and a belief coasting through views off the maps may be
-right). The start from the first image is on trial too ("relocalizing"), with nothing to come
-back to: unconfirmed, it starts again at a later image's psi*
-(:mod:`~localization.filtering.restart_trial`).
-Five steps without one make it "doubtful" while P is narrow (coasting on F through views
-off the maps, e.g. a turn at a corner on a lane-trained map) and "lost" once its position is
-too uncertain to steer on (the heading inflation alone never gets there), or for a while after
-a contact where the map (``free_space``) has room around the belief
-(:mod:`~localization.filtering.map_contact`).
-
-Divergence detection (``detect_divergence``, :mod:`localization.filtering.divergence`; off
-by default): one contradicting image or the window's chi-square
-NIS test make it "doubtful", a strong contradiction or psi*'s disagreement with the belief
-"lost", and both together restart it within a few steps at the pose the window's images
-agree on. ``belief_status``
-says what the belief knows about itself ("tracking", "doubtful", "lost", "relocalizing"; see
-``BELIEF_STATUSES``); a start with ``mode="global"`` (unknown pose) is "relocalizing" from
-the training poses' spread until the images agree.
+Recovery (docs/method.md §13): from the ``inflate_after``-th rejection in a row the heading
+variance grows by ``inflate_factor`` a step, up to ``MAX_HEADING_STD`` (a gate that rejects
+the truth after a heading kick keeps rejecting it); only the heading (inflating the position
+let aliased measurements through). After ``relocalize_after`` steps without an accepted
+measurement the belief restarts at psi* of the current image, on trial against the belief it
+replaced (:mod:`~localization.filtering.restart_trial`); the start from the first image is on
+trial too, with nothing to come back to. Five steps without one make it "doubtful" while P
+is narrow and "lost" once its position is too uncertain to steer on (the heading inflation
+alone never gets there), or for a while after a contact where the map (``free_space``) has
+room around it (:mod:`~localization.filtering.map_contact`). Divergence detection
+(``detect_divergence``, :mod:`~localization.filtering.divergence`; off by default) grades
+the images' evidence against the belief and restarts it where the window's images agree.
+``belief_status`` is one of ``BELIEF_STATUSES``; a start with ``mode="global"`` is
+"relocalizing" from the training poses' spread until the images agree.
 
 :class:`~localization.wrappers.BeliefWrapper` drives it from an env;
 :meth:`AppearanceLocalizer.fit_noise` runs it over a recorded drive to calibrate the noise.
@@ -75,9 +60,8 @@ LOST_AFTER_MISSES = 5  # steps in a row without an accepted measurement: "doubtf
 #: rad); else "doubtful": dead reckoning through unfamiliar views at a corner is not being lost
 LOST_POSITION_STD = 0.5
 MAX_HEADING_STD = 0.5  # rad: heading inflation stops there
-#: wider than the inflation makes it: rejected images alone make the belief "doubtful", and it
-#: drives on (tuning cities 13-16: "lost" at 0.4 rad stopped a belief 0.1 m right to turn in
-#: place into views off the map until a restart jumped to a look-alike)
+#: wider than the inflation: rejected images alone are "doubtful" (0.4 rad stopped a belief
+#: 0.1 m right to turn in place into views off the map; tuning cities 13-16, method §13)
 LOST_HEADING_STD = 0.6
 
 
@@ -111,9 +95,8 @@ class BeliefFilter:
         (the localizer's ``measurement_model(..., noise="heteroscedastic")``; a localizer
         fitted with ``noise_folds >= 2``).
     free_space : callable, optional
-        The map: ``free_space(points (n, 2), margin) -> (n,) bool`` (e.g.
-        ``city.free_mask``); with it a contact (``step(..., contact=True)``) where the map has
-        room around the belief makes it "lost" for a while. None: contacts are ignored.
+        The map, ``free_space(points (n, 2), margin) -> (n,) bool`` (``city.free_mask``): a
+        contact where it has room around the belief makes it "lost". None: contacts ignored.
 
     Attributes
     ----------
