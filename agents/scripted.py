@@ -14,7 +14,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.planner import PlannedPath, StreetPlanner, check_city_point, round_corners
+from agents.planner import (
+    BELIEF_OUTSIDE_FRACTION,
+    PlannedPath,
+    StreetPlanner,
+    check_city_point,
+    clamp_to_city,
+    round_corners,
+)
 from envs.driving import bearing, pursuit_turn_rate
 from localization._validation import check_array, check_int, check_real
 from localization.geometry import Array, wrap_angle
@@ -120,13 +127,18 @@ class Navigator:
         """Plan (or replan) as needed for the believed pose [x, y, yaw] and advance the
         progress along the plan (``names``: the arguments' names in error messages).
 
+        A believed pose that coasted off the map (up to ``BELIEF_OUTSIDE_FRACTION`` of the
+        city's side) is planned from the nearest point of the city.
+
         Raises
         ------
         ValueError
             If the pose or the goal is malformed or far outside the city.
         """
-        pose = check_city_point(pose, names[0], self.planner.city, sizes=(3,))
-        goal = check_city_point(goal, names[1], self.planner.city, sizes=(2,))
+        city = self.planner.city
+        pose = clamp_to_city(check_city_point(pose, names[0], city, sizes=(3,),
+                                              outside_fraction=BELIEF_OUTSIDE_FRACTION), city)
+        goal = check_city_point(goal, names[1], city, sizes=(2,))
         new_goal = self.goal is None or not np.allclose(goal, self.goal)
         if new_goal or self.path.distance_to(pose[:2]) > self.replan_distance:
             self.replans += not new_goal

@@ -135,3 +135,19 @@ def test_drive_sets_off_along_its_heading_unless_turning_round_saves_a_lot(city)
     assert path_length(looping) > 10.0
     with pytest.raises(ValueError, match="pose"):
         planner.drive([0.0, 0.0], [1.0, 1.0])
+
+
+def test_a_belief_that_coasted_off_the_map_is_planned_from_the_city_edge(city):
+    """A kidnapped EKF coasted 12.8 m past the boundary of the 20 m city: the navigator
+    plans from the nearest point of the city instead of stopping the episode; a pose in
+    other units and a goal outside the city are still refused."""
+    from agents.scripted import Navigator
+
+    goal = np.array([3.0, 1.0])
+    off, edge = np.array([22.8, -4.6, 0.3]), np.array([city.bounds[1], -4.6, 0.3])
+    path = Navigator(city).update(off, goal)
+    np.testing.assert_array_equal(path.points, Navigator(city).update(edge, goal).points)
+    with pytest.raises(ValueError, match="far outside the city"):
+        Navigator(city).update(1000.0 * off, goal)  # millimetres
+    with pytest.raises(ValueError, match="far outside the city"):
+        Navigator(city).update(edge, off[:2])
