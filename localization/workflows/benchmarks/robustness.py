@@ -92,7 +92,8 @@ class RobustnessConfig:
     """Settings of the robustness benchmark."""
 
     cities: str = field(default=HELD_OUT_CITIES, metadata={
-        "help": "comma-separated held-out scene seeds (never used to tune anything)"})
+        "help": "comma-separated scene seeds: the held-out 21,22 (never used to tune "
+                "anything), or tuning cities for a run that chooses settings"})
     conditions: str = field(default=DEFAULT_CONDITIONS, metadata={
         "help": "comma-separated: nominal, kidnap and appearance presets (envs.conditions)"})
     sources: str = field(default=",".join(SOURCES), metadata={
