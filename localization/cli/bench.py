@@ -57,6 +57,7 @@ from localization.workflows.benchmarks.agents import AgentsBenchConfig
 from localization.workflows.benchmarks.appearance import FEATURES as APPEARANCE_FEATURES
 from localization.workflows.benchmarks.appearance import TRAININGS, AppearanceBenchConfig
 from localization.workflows.benchmarks.city60 import City60BenchConfig
+from localization.workflows.benchmarks.coverage import FEATURES as COVERAGE_FEATURES
 from localization.workflows.benchmarks.coverage import CoverageBenchConfig
 from localization.workflows.benchmarks.env import EnvBenchConfig
 from localization.workflows.benchmarks.filter import FilterBenchConfig
@@ -182,6 +183,7 @@ def _check_appearance_bench(c: AppearanceBenchConfig) -> None:
 def _check_coverage_bench(c: CoverageBenchConfig) -> None:
     check_int_list("coverage_cities", c.cities, minimum=0)
     check_choices("coverage_cameras", c.cameras, CAMERAS)
+    check_choice("coverage_features", c.features, COVERAGE_FEATURES)
     check_numbers(c, positive=("image_size", "n_train", "n_drive", "n_components", "n_test",
                                "n_drives", "drive_steps"),
                   non_negative=("motion_noise", "seed"), prefix="coverage_")

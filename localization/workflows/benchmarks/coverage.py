@@ -4,18 +4,26 @@ deliverable 1: ``appearance-nav bench --only coverage``; its options are ``--cov
     appearance-nav bench --only coverage                  # perspective on cities 41, 42
     appearance-nav bench --only coverage --coverage-quick  # smoke run
 
-Cities ``cities`` (default 41, 42) were never used to choose anything. The training size was
-chosen on tuning city 12 (64 x 64 perspective, PixelPCA(64), 400 held-out coverage images):
-20000 coverage images gave a median position error of 1.67 m (2 / 9 / 38 % within the three
-thresholds below), 40000 0.37 m (29 / 57 / 88 %), 60000 0.28 m (41 / 69 / 93 %); the error
-was still falling. 100000 (the issue's scale) was tried first on cities 41, 42: a city took
-47 minutes on the shared 2 cores (load ~6), and on city 42 GSE's neighbour graph left one
-sample on its own (a fit failure: the run now reports it and goes on). The default is 40000
-(12 minutes for both cities), the size docs/benchmarks.md §6 reports; pass
-``--coverage-n-train 100000`` for the larger fit. The corner weight was chosen on city 13 (docs/method.md §12). Per city and camera
-one localizer is fitted on ``n_train`` images over the whole street surface at every heading
-(``collect_dataset(mode="coverage")``, :mod:`envs.coverage`), and its noise model on off-lane
-drives (:func:`~localization.workflows.tracking.fit_city_noise` with ``lanes="free"``).
+Cities ``cities`` (default 41, 42) were never used to choose anything. The features, GSE's
+neighbours and the training size were chosen on tuning cities 12 and 13 (64 x 64 perspective,
+400 held-out coverage images each; median position error):
+
+- features, 20000 images: PixelPCA(64) on the upper 55 % of the rows 1.36 / 0.75 m (cities
+  12 / 13); the packaged SmallCNN of the camera (trained pose-contrastively on random views of
+  cities 100-119, ``small_cnn_<camera>_random.pt``) on the whole image, PCA 64: 0.29 / 0.30 m;
+  on the upper rows only 0.45 m (city 12), PCA 32 or the raw 128-d embedding no better;
+- GSE neighbours on the SmallCNN features (``SMALL_CNN_NEIGHBORS``): 6 / 10 / 15 / 20 / 30
+  gave 0.28 / 0.29 / 0.25 / 0.26 / 0.28 m on city 12 and 10 / 15 / 20 gave 0.30 / 0.28 /
+  0.29 m on city 13;
+- size (city 12, SmallCNN): 20000 0.29 m, 40000 0.21 m (10 neighbours), 80000 0.16 m, 100000
+  0.13 m (15 neighbours; the fit 177 s, peak memory 5.1 GB), still falling: the default is
+  the issue's 100000.
+
+The corner weight of the coverage poses was chosen on city 13 (docs/method.md §12). Per city
+and camera one localizer is fitted on ``n_train`` images over the whole street surface at
+every heading (``collect_dataset(mode="coverage")``, :mod:`envs.coverage`), and its noise
+model on off-lane drives (:func:`~localization.workflows.tracking.fit_city_noise` with
+``lanes="free"``).
 
 * single image (the format of Aachen Day-Night): ``n_test`` new coverage poses per city
   (another seed); the share of images whose pose estimate is within (0.25 m, 2 deg),
@@ -70,9 +78,14 @@ from localization.workflows.tracking import (
     track_off_lane,
 )
 
-__all__ = ["CoverageBenchConfig", "run_coverage_bench", "single_image_errors"]
+__all__ = ["FEATURES", "CoverageBenchConfig", "localizer_params", "run_coverage_bench",
+           "single_image_errors"]
 
 METHODS = ("GSE", "KNR", "retrieval")
+#: feature extractors of the coverage localizer (``--coverage-features``)
+FEATURES = ("small_cnn", "pixel_pca")
+#: GSE neighbours on the SmallCNN features (tuning cities 12, 13: docs/benchmarks.md §6)
+SMALL_CNN_NEIGHBORS = 15
 
 
 @dataclass
@@ -85,9 +98,14 @@ class CoverageBenchConfig:
         "help": "comma-separated cameras (perspective, fisheye, catadioptric)"})
     image_size: int = field(default=64, metadata={"help": "square image side (px)"})
     motion_noise: float = field(default=0.1, metadata={"help": "env actuation noise"})
-    n_train: int = field(default=40000, metadata={
+    n_train: int = field(default=100_000, metadata={
         "help": "coverage training images per city and camera"})
-    n_components: int = field(default=64, metadata={"help": "PixelPCA components"})
+    features: str = field(default="small_cnn", metadata={
+        "help": "small_cnn (the packaged SmallCNN of the camera, trained pose-contrastively on "
+                "random views of cities 100-119, on the whole image) or pixel_pca (PixelPCA on "
+                "the localizer's upper image rows)"})
+    n_components: int = field(default=64, metadata={
+        "help": "PCA components of the features"})
     n_drive: int = field(default=1500, metadata={"help": "steps of each noise-calibration drive"})
     n_test: int = field(default=500, metadata={"help": "single test images per city and camera"})
     n_drives: int = field(default=3, metadata={"help": "off-lane drives per city and camera"})
@@ -117,6 +135,25 @@ def make_env(args: CoverageBenchConfig, city: int, camera: str) -> gym.Env:
     return gym.make("AppearanceNav-v0", scene_seed=city, camera=camera,
                     image_size=(args.image_size, args.image_size),
                     motion_noise=args.motion_noise, max_episode_steps=None)
+
+
+def localizer_params(args: CoverageBenchConfig, camera: str) -> dict[str, Any]:
+    """The :class:`AppearanceLocalizer` feature settings of ``args.features`` on ``camera``."""
+    if args.features == "pixel_pca":
+        return {"features_params": {"n_components": args.n_components}}
+    from localization.features.weights import small_cnn_weights
+
+    return {"features": "small_cnn", "rows": (0.0, 1.0),
+            "features_params": {"n_components": args.n_components, "progress": False,
+                                "weights": str(small_cnn_weights(camera, "random"))},
+            "regressor_params": {"n_neighbors": SMALL_CNN_NEIGHBORS}}
+
+
+def features_label(args: CoverageBenchConfig) -> str:
+    """The feature extractor in the report's words."""
+    if args.features == "pixel_pca":
+        return f"PixelPCA({args.n_components})"
+    return f"SmallCNN (random views of other cities; PCA {args.n_components}, whole image)"
 
 
 def single_image_errors(pred: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -149,8 +186,8 @@ def fit_city(args: CoverageBenchConfig, env: gym.Env
     seconds["collect"] = time.perf_counter() - t0
     with quiet():
         t0 = time.perf_counter()
-        loc = AppearanceLocalizer(features_params={"n_components": args.n_components},
-                                  noise_folds=0)
+        loc = AppearanceLocalizer(noise_folds=0,
+                                  **localizer_params(args, env.unwrapped.camera_name))
         images, poses = distinct_views(loc, images, poses)
         loc.fit(images, poses, camera=env.unwrapped.camera_name, city=city_info(env))
         seconds["fit GSE"] = time.perf_counter() - t0
@@ -174,7 +211,7 @@ def lane_localizer(args: CoverageBenchConfig, env: gym.Env) -> AppearanceLocaliz
     with quiet():
         loc, _ = fit_city_localizer(
             env, n_train=args.n_train, lanes="streets", n_drive=args.n_drive, seed=args.seed,
-            localizer_params={"features_params": {"n_components": args.n_components}},
+            localizer_params=localizer_params(args, env.unwrapped.camera_name),
             measurements=("representation",), quality_steps=0)
     return loc
 
@@ -221,7 +258,7 @@ def _result(args: CoverageBenchConfig, done: list[int], cameras: list[str],
             "thresholds": THRESHOLDS, "cameras": list(summary), "summary": summary,
             "drives": loop,
             "setup": f"cities {','.join(map(str, done))}, {args.image_size}x{args.image_size} "
-                     f"images, motion noise {args.motion_noise}, PixelPCA({args.n_components}) "
+                     f"images, motion noise {args.motion_noise}, {features_label(args)} "
                      f"on {args.n_train} coverage images per city; {args.n_test} test images "
                      f"and {args.n_drives} off-lane drive(s) of {args.drive_steps} steps "
                      f"per city"}

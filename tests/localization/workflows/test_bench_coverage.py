@@ -14,6 +14,7 @@ from localization.cli.bench import Args, check
 from localization.workflows.benchmarks import BENCHMARKS, benchmark
 from localization.workflows.benchmarks.coverage import (
     CoverageBenchConfig,
+    localizer_params,
     run_coverage_bench,
     single_image_errors,
     summarize_single,
@@ -37,11 +38,20 @@ def test_single_image_scores_use_both_thresholds_and_count_misses():
     ("cameras", "perspective,pinhole", "--coverage-cameras"),
     ("cities", "41,x", "--coverage-cities"),
     ("n_train", 0, "--coverage-n-train"),
+    ("features", "sift", "--coverage-features"),
 ])
 def test_bad_options_are_named(field, value, option):
     args = Args(only="coverage", coverage=CoverageBenchConfig(**{field: value}))
     with pytest.raises(UsageError, match=option):
         check(args)
+
+
+def test_small_cnn_localizer_uses_the_camera_checkpoint_on_the_whole_image():
+    params = localizer_params(CoverageBenchConfig(features="small_cnn"), "fisheye")
+    assert params["features"] == "small_cnn" and params["rows"] == (0.0, 1.0)
+    assert Path(params["features_params"]["weights"]).name == "small_cnn_fisheye_random.pt"
+    pixel = localizer_params(CoverageBenchConfig(features="pixel_pca", n_components=16), "fisheye")
+    assert pixel == {"features_params": {"n_components": 16}}
 
 
 def test_registered_for_bench_only_coverage():
