@@ -57,7 +57,6 @@ from localization.workflows.benchmarks.agents import AgentsBenchConfig
 from localization.workflows.benchmarks.appearance import FEATURES as APPEARANCE_FEATURES
 from localization.workflows.benchmarks.appearance import TRAININGS, AppearanceBenchConfig
 from localization.workflows.benchmarks.city60 import City60BenchConfig
-from localization.workflows.benchmarks.coverage import FEATURES as COVERAGE_FEATURES
 from localization.workflows.benchmarks.coverage import CoverageBenchConfig
 from localization.workflows.benchmarks.env import EnvBenchConfig
 from localization.workflows.benchmarks.filter import FilterBenchConfig
@@ -68,6 +67,7 @@ from localization.workflows.benchmarks.parallel import ParallelBenchConfig
 from localization.workflows.benchmarks.robustness import AGENTS as ROBUST_AGENTS
 from localization.workflows.benchmarks.robustness import SOURCES as ROBUST_SOURCES
 from localization.workflows.benchmarks.robustness import SPECIAL, RobustnessConfig
+from localization.workflows.benchmarks.street_features import FEATURES as STREET_FEATURES
 from localization.workflows.kidnap_eval import FILTERS
 from localization.workflows.parallel import check_ray_address
 from localization.workflows.sim import (
@@ -183,7 +183,7 @@ def _check_appearance_bench(c: AppearanceBenchConfig) -> None:
 def _check_coverage_bench(c: CoverageBenchConfig) -> None:
     check_int_list("coverage_cities", c.cities, minimum=0)
     check_choices("coverage_cameras", c.cameras, CAMERAS)
-    check_choice("coverage_features", c.features, COVERAGE_FEATURES)
+    check_choice("coverage_features", c.features, STREET_FEATURES)
     check_numbers(c, positive=("image_size", "n_train", "n_drive", "n_components", "n_test",
                                "n_drives", "drive_steps"),
                   non_negative=("motion_noise", "seed"), prefix="coverage_")
@@ -210,6 +210,7 @@ def _check_noise_bench(c: NoiseBenchConfig) -> None:
 
 def _check_city60_bench(c: City60BenchConfig) -> None:
     check_int_list("city60_cities", c.cities, minimum=0)
+    check_choice("city60_features", c.features, STREET_FEATURES)
     check_numbers(c, positive=("city_size", "image_size", "density", "n_components", "n_drive",
                                "n_drives", "drive_steps", "episodes", "districts"),
                   non_negative=("motion_noise", "max_episode_steps", "seed", "overlap"),

@@ -7,7 +7,8 @@
 On each city of ``cities`` (``city_size`` = 60 m: 9 x 9 blocks, 2000 m^2 of streets, 7.8
 times the default city's) a street-wide localizer is fitted with
 :func:`~localization.workflows.tracking.fit_city_localizer` (``lanes="streets"``, 64 x 64
-perspective, PixelPCA(``n_components``)) on
+perspective, ``features``: by default the packaged SmallCNN of random views of other cities,
+PCA ``n_components``, chosen on tuning cities 11 and 12, :mod:`.street_features`) on
 :func:`~localization.workflows.tracking.street_train_size` images: ``density`` images per
 square metre of street, so the training set grows with the street area. By default it is a
 :class:`~localization.districts.DistrictLocalizer` of ``districts`` x ``districts`` maps
@@ -58,6 +59,7 @@ from agents.scripted import ScriptedAgent
 from agents.sources import make_pose_env
 from envs.datasets import collect_dataset
 from localization.workflows.benchmarks.coverage import summarize_drives
+from localization.workflows.benchmarks.street_features import features_label, localizer_features
 from localization.workflows.tracking import (
     fit_city_localizer,
     street_train_size,
@@ -82,7 +84,10 @@ class City60BenchConfig:
     motion_noise: float = field(default=0.1, metadata={"help": "env actuation noise"})
     density: float = field(default=47.0, metadata={
         "help": "street-lane training images per square metre of street (chosen on city 53)"})
-    n_components: int = field(default=64, metadata={"help": "PixelPCA components"})
+    features: str = field(default="small_cnn", metadata={
+        "help": "small_cnn (the packaged SmallCNN of random views of other cities, whole "
+                "image) or pixel_pca (PixelPCA on the localizer's upper image rows)"})
+    n_components: int = field(default=64, metadata={"help": "PCA components of the features"})
     districts: int = field(default=3, metadata={
         "help": "a DistrictLocalizer of n x n districts (chosen on city 53); 1: one map of "
                 "the whole city"})
@@ -130,7 +135,8 @@ def fit_city(args: City60BenchConfig, env: gym.Env) -> tuple[Any, dict[str, floa
         warnings.filterwarnings("ignore", message=".*quality.*")
         loc, seconds = fit_city_localizer(
             env, n_train=n_train, lanes="streets", n_drive=args.n_drive, seed=args.seed,
-            localizer_params={"features_params": {"n_components": args.n_components}},
+            localizer_params=localizer_features(args.features, env.unwrapped.camera_name,
+                                                args.n_components),
             measurements=("representation",), quality_steps=0,
             districts=None if args.districts == 1 else (args.districts, args.districts),
             overlap=args.overlap)
@@ -249,7 +255,8 @@ def _result(args: City60BenchConfig, records: dict[int, dict[str, Any]],
             "summary": summary, "records": {str(c): r for c, r in records.items()},
             "setup": f"cities {','.join(map(str, records)) or 'none'}, {args.city_size:g} m, "
                      f"{args.image_size}x{args.image_size} perspective, motion noise "
-                     f"{args.motion_noise}, PixelPCA({args.n_components}) on {args.density:g} "
+                     f"{args.motion_noise}, {features_label(args.features, args.n_components)} "
+                     f"on {args.density:g} "
                      f"street-lane images per m^2 of street, "
                      f"{_maps(args)}, {args.filter} belief; {args.n_drives} street tour(s) of "
                      f"{args.drive_steps} steps and {args.episodes} agent episode(s) "

@@ -69,6 +69,10 @@ from localization.baselines import KernelRegressor, RetrievalRegressor
 from localization.geometry import wrap_angle
 from localization.localizer import AppearanceLocalizer, city_info
 from localization.workflows.benchmarks.coverage_report import THRESHOLDS, markdown
+from localization.workflows.benchmarks.street_features import (
+    features_label,
+    localizer_features,
+)
 from localization.workflows.tracking import (
     distinct_views,
     fit_city_localizer,
@@ -78,12 +82,10 @@ from localization.workflows.tracking import (
     track_off_lane,
 )
 
-__all__ = ["FEATURES", "CoverageBenchConfig", "localizer_params", "run_coverage_bench",
+__all__ = ["SMALL_CNN_NEIGHBORS", "CoverageBenchConfig", "localizer_params", "run_coverage_bench",
            "single_image_errors"]
 
 METHODS = ("GSE", "KNR", "retrieval")
-#: feature extractors of the coverage localizer (``--coverage-features``)
-FEATURES = ("small_cnn", "pixel_pca")
 #: GSE neighbours on the SmallCNN features (tuning cities 12, 13: docs/benchmarks.md §6)
 SMALL_CNN_NEIGHBORS = 15
 
@@ -138,22 +140,12 @@ def make_env(args: CoverageBenchConfig, city: int, camera: str) -> gym.Env:
 
 
 def localizer_params(args: CoverageBenchConfig, camera: str) -> dict[str, Any]:
-    """The :class:`AppearanceLocalizer` feature settings of ``args.features`` on ``camera``."""
-    if args.features == "pixel_pca":
-        return {"features_params": {"n_components": args.n_components}}
-    from localization.features.weights import small_cnn_weights
-
-    return {"features": "small_cnn", "rows": (0.0, 1.0),
-            "features_params": {"n_components": args.n_components, "progress": False,
-                                "weights": str(small_cnn_weights(camera, "random"))},
-            "regressor_params": {"n_neighbors": SMALL_CNN_NEIGHBORS}}
-
-
-def features_label(args: CoverageBenchConfig) -> str:
-    """The feature extractor in the report's words."""
-    if args.features == "pixel_pca":
-        return f"PixelPCA({args.n_components})"
-    return f"SmallCNN (random views of other cities; PCA {args.n_components}, whole image)"
+    """The :class:`AppearanceLocalizer` feature settings of ``args.features`` on ``camera``
+    (the SmallCNN with ``SMALL_CNN_NEIGHBORS`` GSE neighbours)."""
+    params = localizer_features(args.features, camera, args.n_components)
+    if args.features == "small_cnn":
+        params["regressor_params"] = {"n_neighbors": SMALL_CNN_NEIGHBORS}
+    return params
 
 
 def single_image_errors(pred: np.ndarray, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -258,8 +250,9 @@ def _result(args: CoverageBenchConfig, done: list[int], cameras: list[str],
             "thresholds": THRESHOLDS, "cameras": list(summary), "summary": summary,
             "drives": loop,
             "setup": f"cities {','.join(map(str, done))}, {args.image_size}x{args.image_size} "
-                     f"images, motion noise {args.motion_noise}, {features_label(args)} "
-                     f"on {args.n_train} coverage images per city; {args.n_test} test images "
+                     f"images, motion noise {args.motion_noise}, "
+                     f"{features_label(args.features, args.n_components)} on {args.n_train} "
+                     f"coverage images per city; {args.n_test} test images "
                      f"and {args.n_drives} off-lane drive(s) of {args.drive_steps} steps "
                      f"per city"}
 

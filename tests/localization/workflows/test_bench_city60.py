@@ -25,6 +25,7 @@ from localization.workflows.tracking import street_train_size
     ("n_drive", 100, "--city60-n-drive"),
     ("max_episode_steps", -1, "--city60-max-episode-steps"),
     ("districts", 0, "--city60-districts"),
+    ("features", "orb", "--city60-features"),
     ("overlap", -1.0, "--city60-overlap"),
     ("filter", "ukf", "--city60-filter"),
 ])

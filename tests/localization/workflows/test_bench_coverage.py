@@ -13,12 +13,14 @@ from localization.cli._args import UsageError
 from localization.cli.bench import Args, check
 from localization.workflows.benchmarks import BENCHMARKS, benchmark
 from localization.workflows.benchmarks.coverage import (
+    SMALL_CNN_NEIGHBORS,
     CoverageBenchConfig,
     localizer_params,
     run_coverage_bench,
     single_image_errors,
     summarize_single,
 )
+from localization.workflows.benchmarks.street_features import localizer_features
 
 
 def test_single_image_scores_use_both_thresholds_and_count_misses():
@@ -50,8 +52,14 @@ def test_small_cnn_localizer_uses_the_camera_checkpoint_on_the_whole_image():
     params = localizer_params(CoverageBenchConfig(features="small_cnn"), "fisheye")
     assert params["features"] == "small_cnn" and params["rows"] == (0.0, 1.0)
     assert Path(params["features_params"]["weights"]).name == "small_cnn_fisheye_random.pt"
+    assert params["regressor_params"] == {"n_neighbors": SMALL_CNN_NEIGHBORS}
     pixel = localizer_params(CoverageBenchConfig(features="pixel_pca", n_components=16), "fisheye")
     assert pixel == {"features_params": {"n_components": 16}}
+
+
+def test_unknown_features_are_named():
+    with pytest.raises(ValueError, match="features must be one of small_cnn, pixel_pca"):
+        localizer_features("sift", "perspective", 64)
 
 
 def test_registered_for_bench_only_coverage():
