@@ -232,8 +232,8 @@ def _check_robustness_bench(c: RobustnessConfig) -> None:
                   [*SPECIAL, *(n for n in CONDITION_NAMES if n != "random")])
     check_choices("robustness_sources", c.sources, ROBUST_SOURCES)
     check_choices("robustness_agents", c.agents, ROBUST_AGENTS)
-    check_choice("robustness_randomised_features", c.randomised_features,
-                 ["small_cnn", "pixel_pca"])
+    check_choice("robustness_randomised_features", c.randomised_features, STREET_FEATURES)
+    check_choice("robustness_daylight_features", c.daylight_features, STREET_FEATURES)
     check_numbers(c, positive=("episodes", "image_size", "n_train", "n_train_randomised",
                                "n_drive", "max_steps",
                                "kidnap_at", "workers"),

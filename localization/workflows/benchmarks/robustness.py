@@ -63,6 +63,7 @@ from localization.workflows.benchmarks.robustness_report import (
     markdown,
     targets,
 )
+from localization.workflows.benchmarks.street_features import localizer_features
 from localization.workflows.parallel import RAY_ADDRESS_HELP, WORKERS_HELP, map_tasks, worker_env
 from localization.workflows.tracking import fit_city_localizer
 
@@ -115,6 +116,10 @@ class RobustnessConfig:
         "help": "street training images of the daylight localizer"})
     n_train_randomised: int = field(default=16000, metadata={
         "help": "street training images of the randomised-conditions localizer"})
+    daylight_features: str = field(default="pixel_pca", metadata={
+        "help": "features of the daylight localizer: pixel_pca (the localizer's default) or "
+                "small_cnn (the packaged SmallCNN of random views of other cities, whole image, "
+                "PCA 64; benchmarks/street_features.py)"})
     randomised_features: str = field(default="small_cnn", metadata={
         "help": "features of the randomised localizer: small_cnn (the packaged SmallCNN trained "
                 "under randomised conditions on cities 100-119, PCA 64) or pixel_pca (the "
@@ -177,9 +182,14 @@ def localizer_path(args: RobustnessConfig, city: int, training: str) -> Path:
 
 
 def localizer_params(args: RobustnessConfig, training: str) -> dict[str, Any] | None:
-    """:class:`AppearanceLocalizer` settings of a training: the defaults, or for the randomised
-    localizer with ``randomised_features="small_cnn"`` the condition-randomised SmallCNN."""
-    if training == "daylight" or args.randomised_features == "pixel_pca":
+    """:class:`AppearanceLocalizer` settings of a training: the defaults; the daylight localizer
+    with ``daylight_features="small_cnn"`` the SmallCNN of random views; the randomised one
+    with ``randomised_features="small_cnn"`` the condition-randomised SmallCNN."""
+    if training == "daylight":
+        if args.daylight_features == "pixel_pca":
+            return None
+        return localizer_features(args.daylight_features, "perspective", 64)
+    if args.randomised_features == "pixel_pca":
         return None
     from localization.features.weights import small_cnn_weights
 

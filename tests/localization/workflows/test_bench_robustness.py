@@ -12,6 +12,7 @@ from agents.evaluation import Episode
 from localization.workflows.benchmarks.robustness import (
     RobustnessConfig,
     _summary,
+    localizer_params,
     run_robustness_bench,
     runs_condition,
     training_of,
@@ -30,6 +31,15 @@ def test_image_free_sources_skip_lighting_presets_only() -> None:
     assert not runs_condition("oracle", "night") and not runs_condition("dead_reckoning", "dusk")
     assert runs_condition("oracle", "traffic") and runs_condition("dead_reckoning", "kidnap")
     assert training_of("kidnap") == "daylight" and training_of("traffic") == "randomised"
+
+
+def test_each_localizer_gets_its_own_features() -> None:
+    plain = RobustnessConfig()
+    assert localizer_params(plain, "daylight") is None
+    assert "conditions" in localizer_params(plain, "randomised")["features_params"]["weights"]
+    cnn = localizer_params(RobustnessConfig(daylight_features="small_cnn"), "daylight")
+    assert Path(cnn["features_params"]["weights"]).name == "small_cnn_perspective_random.pt"
+    assert cnn["rows"] == (0.0, 1.0)
 
 
 def test_the_report_calls_only_the_held_out_cities_held_out() -> None:
