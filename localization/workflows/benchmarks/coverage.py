@@ -11,12 +11,13 @@ neighbours and the training size were chosen on tuning cities 12 and 13 (64 x 64
 - features, 20000 images: PixelPCA(64) on the upper 55 % of the rows 1.36 / 0.75 m (cities
   12 / 13); the packaged SmallCNN of the camera (trained pose-contrastively on random views of
   cities 100-119, ``small_cnn_<camera>_random.pt``) on the whole image, PCA 64: 0.29 / 0.30 m;
-  on the upper rows only 0.45 m (city 12), PCA 32 or the raw 128-d embedding no better;
+  on the upper rows only 0.45 m (city 12); PCA 32 0.28 m and the raw 128-d embedding 0.30 m
+  (city 12), no clear gain;
 - GSE neighbours on the SmallCNN features (``SMALL_CNN_NEIGHBORS``): 6 / 10 / 15 / 20 / 30
   gave 0.28 / 0.29 / 0.25 / 0.26 / 0.28 m on city 12 and 10 / 15 / 20 gave 0.30 / 0.28 /
   0.29 m on city 13;
 - size (city 12, SmallCNN): 20000 0.29 m, 40000 0.21 m (10 neighbours), 80000 0.16 m, 100000
-  0.13 m (15 neighbours; the fit 177 s, peak memory 5.1 GB), still falling: the default is
+  0.13 m (15 neighbours; the fit 177 s, the whole run's peak memory 5.1 GB), still falling: the default is
   the issue's 100000.
 
 The corner weight of the coverage poses was chosen on city 13 (docs/method.md §12). Per city

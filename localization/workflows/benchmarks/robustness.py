@@ -186,12 +186,10 @@ def localizer_path(args: RobustnessConfig, city: int, training: str) -> Path:
 
 
 def localizer_params(args: RobustnessConfig, training: str) -> dict[str, Any] | None:
-    """:class:`AppearanceLocalizer` settings of a training: the defaults; the daylight localizer
-    with ``daylight_features="small_cnn"`` the SmallCNN of random views; the randomised one
-    with ``randomised_features="small_cnn"`` the condition-randomised SmallCNN."""
+    """:class:`AppearanceLocalizer` settings of a training: the daylight localizer's
+    ``daylight_features`` (:func:`.street_features.localizer_features`); the randomised one's
+    defaults, or with ``randomised_features="small_cnn"`` the condition-randomised SmallCNN."""
     if training == "daylight":
-        if args.daylight_features == "pixel_pca":
-            return None
         return localizer_features(args.daylight_features, "perspective", 64)
     if args.randomised_features == "pixel_pca":
         return None

@@ -1,4 +1,5 @@
-"""Feature settings of the street-wide localizers of the coverage and city60 benchmarks.
+"""Feature settings of the street-wide localizers of the coverage, city60 and robustness
+benchmarks.
 
 ``"small_cnn"`` is the packaged SmallCNN of the camera trained pose-contrastively on random
 views of cities 100-119 (``small_cnn_<camera>_random.pt``,

@@ -35,7 +35,7 @@ def test_image_free_sources_skip_lighting_presets_only() -> None:
 
 def test_each_localizer_gets_its_own_features() -> None:
     plain = RobustnessConfig(daylight_features="pixel_pca")
-    assert localizer_params(plain, "daylight") is None
+    assert localizer_params(plain, "daylight") == {"features_params": {"n_components": 64}}
     assert "conditions" in localizer_params(plain, "randomised")["features_params"]["weights"]
     cnn = localizer_params(RobustnessConfig(), "daylight")
     assert Path(cnn["features_params"]["weights"]).name == "small_cnn_perspective_random.pt"
