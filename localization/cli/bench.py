@@ -234,6 +234,7 @@ def _check_robustness_bench(c: RobustnessConfig) -> None:
     check_choices("robustness_agents", c.agents, ROBUST_AGENTS)
     check_choice("robustness_randomised_features", c.randomised_features, STREET_FEATURES)
     check_choice("robustness_daylight_features", c.daylight_features, STREET_FEATURES)
+    check_choice("robustness_randomised_map", c.randomised_map, ("random", "default"))
     check_numbers(c, positive=("episodes", "image_size", "n_train", "n_train_randomised",
                                "n_drive", "max_steps",
                                "kidnap_at", "workers"),

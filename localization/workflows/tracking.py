@@ -90,6 +90,7 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
                        measurements: tuple[str, ...] = MEASUREMENTS, progress: bool = False,
                        quality_steps: int | None = None,
                        districts: tuple[int, int] | None = None, overlap: float = 4.0,
+                       noise_env: gym.Env | None = None,
                        ) -> tuple[AppearanceLocalizer | DistrictLocalizer, dict[str, float]]:
     """Fit an :class:`AppearanceLocalizer` and its noise model on the env's city.
 
@@ -125,6 +126,10 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
         Fit a :class:`~localization.districts.DistrictLocalizer` with this grid of
         districts (``overlap`` metres of hand-over zone), each an AppearanceLocalizer of
         ``localizer_params``: for large cities, where one map folds.
+    noise_env : gym.Env, optional
+        Env of the noise, calibration and quality drives (default ``env``): the same city
+        in other conditions, e.g. a map fitted on daylight images whose measurement noise
+        is learnt under randomised conditions (``conditions="random"``).
 
     Returns
     -------
@@ -145,6 +150,7 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
     if steps < 0:
         raise ValueError(f"quality_steps must be >= 0 or None, got {quality_steps}")
     _check_training(lanes)
+    drive_env = env if noise_env is None else _same_city(env, noise_env)
     seconds = {}
     t0 = time.perf_counter()
     params = {"noise_folds": 0, **(localizer_params or {})}
@@ -164,18 +170,29 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
             city=city_info(env))
     seconds["fit"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    fit_city_noise(env, loc, lanes, n_drive, seed, calibrate_on_belief, measurements, progress)
+    fit_city_noise(drive_env, loc, lanes, n_drive, seed, calibrate_on_belief, measurements,
+                   progress)
     seconds["noise"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     metrics = None
     if steps > 0:
         model = "representation" if "representation" in measurements else measurements[0]
         track = TRACKS[lanes]
-        metrics = track_metrics(track(env, loc, model, steps, seed=seed + 3))
+        metrics = track_metrics(track(drive_env, loc, model, steps, seed=seed + 3))
     loc.quality_ = quality_report(metrics, loc.consistency_)
     seconds["quality"] = time.perf_counter() - t0
     warn_quality(loc.quality_)
     return loc, seconds
+
+
+def _same_city(env: gym.Env, noise_env: gym.Env) -> gym.Env:
+    """``noise_env`` after checking it shows ``env``'s city (ValueError otherwise)."""
+    theirs, ours = city_info(noise_env), city_info(env)
+    if theirs != ours:
+        raise ValueError("noise_env must show the same city as env, got scene_seed "
+                         f"{theirs['scene_seed']} (city_size {theirs['city_size']}) against "
+                         f"{ours['scene_seed']} ({ours['city_size']})")
+    return noise_env
 
 
 def street_train_size(env: gym.Env, density: float) -> int:

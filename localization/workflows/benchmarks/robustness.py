@@ -127,6 +127,10 @@ class RobustnessConfig:
         "help": "features of the randomised localizer: small_cnn (the packaged SmallCNN trained "
                 "under randomised conditions on cities 100-119, PCA 64) or pixel_pca (the "
                 "localizer's default PixelPCA); chosen on tuning city 11"})
+    randomised_map: str = field(default="random", metadata={
+        "help": "conditions of the randomised localizer's map images: random (every image "
+                "its own look) or default (daylight images; its features and its noise and "
+                "calibration drives stay under randomised conditions)"})
     n_drive: int = field(default=1500, metadata={"help": "steps of each noise-calibration drive"})
     max_steps: int = field(default=600, metadata={
         "help": "episode truncation (steps); 1.5x the agents' default 400: the longest "
@@ -209,23 +213,31 @@ class FitTask:
     training: str
 
 
+def _fit_env(args: RobustnessConfig, city: int, conditions: str) -> gym.Env:
+    return gym.make("AppearanceNav-v0", scene_seed=city, conditions=conditions,
+                    image_size=(args.image_size, args.image_size), motion_noise=args.motion_noise,
+                    max_episode_steps=None)
+
+
 def run_fit_task(task: FitTask) -> float:
     """Fit the task's street-wide localizer, save it; return the seconds taken."""
     args, t0 = task.config, time.perf_counter()
-    env = gym.make("AppearanceNav-v0", scene_seed=task.city,
-                   conditions="default" if task.training == "daylight" else "random",
-                   image_size=(args.image_size, args.image_size), motion_noise=args.motion_noise,
-                   max_episode_steps=None)
+    daylight = task.training == "daylight"
+    looks = "default" if daylight else "random"  # of the noise and calibration drives
+    map_looks = looks if daylight else args.randomised_map
+    env = _fit_env(args, task.city, map_looks)
+    noise_env = env if map_looks == looks else _fit_env(args, task.city, looks)
     with warnings.catch_warnings():  # GSE's eigen-gap warning on thin tubes of poses
         warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
         warnings.filterwarnings("ignore", message=".*quality.*")
-        loc, _ = fit_city_localizer(env, n_train=args.n_train if task.training == "daylight"
+        loc, _ = fit_city_localizer(env, n_train=args.n_train if daylight
                                     else args.n_train_randomised, lanes="streets",
                                     n_drive=args.n_drive, seed=task.city,
                                     localizer_params=localizer_params(args, task.training),
                                     calibrate_on_belief=False, measurements=("representation",),
-                                    quality_steps=0)
+                                    quality_steps=0, noise_env=noise_env)
     env.close()
+    noise_env.close()
     path = localizer_path(args, task.city, task.training)
     path.parent.mkdir(parents=True, exist_ok=True)
     loc.save(path)

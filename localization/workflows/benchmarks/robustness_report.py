@@ -21,6 +21,12 @@ TARGETS = {"scripted_nominal": 0.98, "scripted_kidnap_particles": 0.90,
 BELIEFS = ("ekf", "particles")
 
 
+def _map_images(conditions: str) -> str:
+    """How the randomised localizer's map images look."""
+    return ("daylight map images, noise under randomised conditions" if conditions == "default"
+            else "images in randomised conditions")
+
+
 def _target(name: str, value: float, limit: str, ok: bool) -> dict[str, Any]:
     return {"target": name, "value": round(value, 3), "limit": limit, "pass": bool(ok)}
 
@@ -125,7 +131,8 @@ def markdown(result: dict[str, Any]) -> str:
             f"steps, kidnap at step {a['kidnap_at']}; street-wide localizers: daylight "
             f"({a.get('daylight_features', 'pixel_pca')}, {a['n_train']} images) for nominal and "
             f"kidnap, randomised conditions "
-            f"({a['randomised_features']}, {a['n_train_randomised']} images) for the presets; "
+            f"({a['randomised_features']}, {a['n_train_randomised']} "
+            f"{_map_images(a.get('randomised_map', 'random'))}) for the presets; "
             f"{'EKF with divergence detection; ' if a.get('detect_divergence') else ''}"
             f"{result['seconds']:.0f} s ({result['fit_seconds']:.0f} s of fits).\n\n"
             "\"as nominal\": the source never sees an image, so its episodes under a lighting "

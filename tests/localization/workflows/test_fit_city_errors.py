@@ -1,9 +1,12 @@
-"""fit_city_localizer names the argument to change when its noise drive is too short."""
+"""fit_city_localizer names the argument to change when its noise drive is too short, and
+learns its noise where ``noise_env`` says."""
 
 from __future__ import annotations
 
 import warnings
 
+import gymnasium as gym
+import numpy as np
 import pytest
 
 from localization.workflows.tracking import fit_city_localizer
@@ -20,3 +23,28 @@ def test_too_short_a_noise_drive_names_n_drive():
                                localizer_params={"features_params": {"n_components": 16}})
     finally:
         env.close()
+
+
+def _fit(env, noise_env=None):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        loc, _ = fit_city_localizer(env, n_train=400, lanes="route", n_drive=200,
+                                    localizer_params={"features_params": {"n_components": 8}},
+                                    calibrate_on_belief=False, measurements=("representation",),
+                                    quality_steps=0, noise_env=noise_env)
+    return loc
+
+
+def test_noise_env_drives_the_noise_model_and_not_the_map():
+    """A map fitted in daylight learns its measurement noise where noise_env says."""
+    env, dusk = make_env(), make_env(conditions="dusk")
+    try:
+        plain, other = _fit(env), _fit(env, noise_env=dusk)
+        assert plain.fingerprint_ == other.fingerprint_  # the same daylight map images
+        assert not np.allclose(plain.noise_["representation"], other.noise_["representation"])
+        with pytest.raises(ValueError, match="noise_env must show the same city"):
+            fit_city_localizer(env, n_train=400, n_drive=200,
+                               noise_env=gym.make("AppearanceNav-v0", scene_seed=1))
+    finally:
+        env.close()
+        dusk.close()
