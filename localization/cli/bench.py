@@ -55,7 +55,11 @@ from localization.cli._args import (
 from localization.workflows.benchmarks import BENCHMARKS, benchmark
 from localization.workflows.benchmarks.agents import AgentsBenchConfig
 from localization.workflows.benchmarks.appearance import FEATURES as APPEARANCE_FEATURES
-from localization.workflows.benchmarks.appearance import TRAININGS, AppearanceBenchConfig
+from localization.workflows.benchmarks.appearance import (
+    RANDOMISED_MAPS,
+    TRAININGS,
+    AppearanceBenchConfig,
+)
 from localization.workflows.benchmarks.city60 import City60BenchConfig
 from localization.workflows.benchmarks.coverage import CoverageBenchConfig
 from localization.workflows.benchmarks.env import EnvBenchConfig
@@ -174,6 +178,7 @@ def _check_appearance_bench(c: AppearanceBenchConfig) -> None:
     check_choice("appearance_normalize", c.normalize, NORMALIZATIONS)
     check_choice("appearance_features", c.features, APPEARANCE_FEATURES)
     check_choice("appearance_lanes", c.lanes, LANE_SETS)
+    check_choice("appearance_randomised_map", c.randomised_map, RANDOMISED_MAPS)
     check_numbers(c, positive=("image_size", "n_train", "n_drive", "n_components", "n_test",
                                "n_drives", "drive_steps"),
                   non_negative=("motion_noise", "seed"), prefix="appearance_")
@@ -234,7 +239,7 @@ def _check_robustness_bench(c: RobustnessConfig) -> None:
     check_choices("robustness_agents", c.agents, ROBUST_AGENTS)
     check_choice("robustness_randomised_features", c.randomised_features, STREET_FEATURES)
     check_choice("robustness_daylight_features", c.daylight_features, STREET_FEATURES)
-    check_choice("robustness_randomised_map", c.randomised_map, ("random", "default"))
+    check_choice("robustness_randomised_map", c.randomised_map, RANDOMISED_MAPS)
     check_numbers(c, positive=("episodes", "image_size", "n_train", "n_train_randomised",
                                "n_drive", "max_steps",
                                "kidnap_at", "workers"),

@@ -64,11 +64,13 @@ from localization.workflows.tracking import (
     track_streets,
 )
 
-__all__ = ["FEATURES", "THRESHOLDS", "AppearanceBenchConfig", "OcclusionRecorder", "run_appearance_bench"]
+__all__ = ["FEATURES", "RANDOMISED_MAPS", "THRESHOLDS", "AppearanceBenchConfig", "OcclusionRecorder", "run_appearance_bench"]
 
 #: (metres, degrees) of the visual-localization benchmarks
 THRESHOLDS = ((0.25, 2.0), (0.5, 5.0), (5.0, 10.0))
 TRAININGS = {"daylight": "default", "randomised": "random"}
+#: looks of the randomised localizer's map images (``--appearance-randomised-map``)
+RANDOMISED_MAPS = ("random", "default")
 #: feature extractors the benchmark compares (``--appearance-features``)
 FEATURES = ("pixel_pca", "small_cnn")
 
@@ -95,6 +97,10 @@ class AppearanceBenchConfig:
         "help": "pixel_pca (PixelPCA, see --appearance-normalize) or small_cnn (the packaged "
                 "SmallCNN trained on cities 100-119 under randomised conditions, "
                 "localization.features.weights)"})
+    randomised_map: str = field(default="random", metadata={
+        "help": "conditions of the randomised localizer's map images: random (every image "
+                "its own look) or default (daylight images; its noise and calibration drives "
+                "stay under randomised conditions)"})
     n_components: int = field(default=64, metadata={
         "help": "PixelPCA components (small_cnn: PCA components of its embedding)"})
     normalize: str = field(default="channels", metadata={
@@ -189,16 +195,22 @@ def features_label(args: AppearanceBenchConfig) -> str:
 
 
 def fit(args: AppearanceBenchConfig, city: int, training: str) -> Any:
-    """The localizer ``training`` ("daylight" or "randomised") of ``city``."""
-    env = make_env(args, city, TRAININGS[training])
+    """The localizer ``training`` ("daylight" or "randomised") of ``city``: its noise and
+    calibration drives in the training's look, its map images too (the randomised one's
+    in ``args.randomised_map``)."""
+    looks = TRAININGS[training]
+    map_looks = args.randomised_map if training == "randomised" else looks
+    env = make_env(args, city, map_looks)
+    noise_env = env if map_looks == looks else make_env(args, city, looks)
     with warnings.catch_warnings():  # GSE's eigen-gap warning on a thin tube of poses
         warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
         warnings.filterwarnings("ignore", message=".*quality.*")
         loc, _ = fit_city_localizer(
             env, n_train=args.n_train, lanes=args.lanes, n_drive=args.n_drive, seed=args.seed,
             localizer_params=localizer_params(args), calibrate_on_belief=False,
-            measurements=("representation",), quality_steps=0)
+            measurements=("representation",), quality_steps=0, noise_env=noise_env)
     env.close()
+    noise_env.close()
     return loc
 
 
@@ -298,7 +310,8 @@ def run_appearance_bench(args: AppearanceBenchConfig) -> dict[str, Any]:
               "setup": f"cities {args.cities}, {args.lanes} lanes, "
                        f"{args.image_size}x{args.image_size} images, "
                        f"motion noise {args.motion_noise}, {features_label(args)} "
-                       f"on {args.n_train} lane images per city; "
+                       f"on {args.n_train} lane images per city (the randomised "
+                       f"localizer's map images in {args.randomised_map} conditions); "
                        f"{args.n_test} test images and {args.n_drives} drive(s) of "
                        f"{args.drive_steps} steps per city and condition"}
     (out / "bench_appearance.json").write_text(json.dumps(result, indent=2))

@@ -54,6 +54,7 @@ def test_targets_are_the_issues():
     ("trainings", "daylight,nightly", "--appearance-trainings"),
     ("normalize", "gamma", "--appearance-normalize"),
     ("features", "resnet", "--appearance-features"),
+    ("randomised_map", "dusk", "--appearance-randomised-map"),
     ("cities", "31,x", "--appearance-cities"),
     ("n_test", 0, "--appearance-n-test"),
 ])

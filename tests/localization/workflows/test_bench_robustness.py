@@ -9,6 +9,8 @@ from pathlib import Path
 import pytest
 
 from agents.evaluation import Episode
+from localization.cli._args import UsageError
+from localization.cli.bench import Args, check
 from localization.workflows.benchmarks.robustness import (
     RobustnessConfig,
     _summary,
@@ -73,6 +75,12 @@ def test_unknown_names_are_refused(key: str, value: str, match: str) -> None:
         RobustnessConfig(**{key: value}).lists()
 
 
+def test_an_unknown_randomised_map_is_named() -> None:
+    args = Args(only="robustness", robustness=RobustnessConfig(randomised_map="dusk"))
+    with pytest.raises(UsageError, match="--robustness-randomised-map"):
+        check(args)
+
+
 def test_targets_from_rows() -> None:
     row = {"success_rate": 0.95, "collisions_per_episode": 0.03}
     summary = {"scripted/oracle/nominal": {**row, "success_rate": 1.0, "collisions_per_episode":
@@ -90,7 +98,7 @@ def test_parallel_episodes_equal_the_serial_run(tmp_path: Path) -> None:
     args = RobustnessConfig(cities="21", conditions="nominal,kidnap,traffic",
                             sources="oracle,ekf,dead_reckoning", agents="scripted", episodes=2,
                             image_size=32, n_train=500, n_drive=400, max_steps=25, kidnap_at=5,
-                            out_dir=str(tmp_path))
+                            randomised_map="default", out_dir=str(tmp_path))
     serial = run_robustness_bench(args)
     episodes = tmp_path / "robustness" / "episodes"
     assert len(list(episodes.glob("*.json"))) == 18  # every task's records, for a resume
