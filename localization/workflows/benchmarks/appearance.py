@@ -64,13 +64,24 @@ from localization.workflows.tracking import (
     track_streets,
 )
 
-__all__ = ["FEATURES", "RANDOMISED_MAPS", "THRESHOLDS", "AppearanceBenchConfig", "OcclusionRecorder", "run_appearance_bench"]
+__all__ = ["FEATURES", "RANDOMISED_MAPS", "THRESHOLDS", "AppearanceBenchConfig", "OcclusionRecorder",
+           "run_appearance_bench", "training_looks"]
 
 #: (metres, degrees) of the visual-localization benchmarks
 THRESHOLDS = ((0.25, 2.0), (0.5, 5.0), (5.0, 10.0))
 TRAININGS = {"daylight": "default", "randomised": "random"}
 #: looks of the randomised localizer's map images (``--appearance-randomised-map``)
 RANDOMISED_MAPS = ("random", "default")
+
+
+def training_looks(training: str, randomised_map: str) -> tuple[str, str]:
+    """(conditions of the map images, conditions of the noise and calibration drives) of the
+    localizer ``training`` ("daylight" or "randomised"); the randomised one's map images in
+    ``randomised_map`` (one of :data:`RANDOMISED_MAPS`)."""
+    looks = TRAININGS[training]
+    return (randomised_map if training == "randomised" else looks), looks
+
+
 #: feature extractors the benchmark compares (``--appearance-features``)
 FEATURES = ("pixel_pca", "small_cnn")
 
@@ -198,8 +209,7 @@ def fit(args: AppearanceBenchConfig, city: int, training: str) -> Any:
     """The localizer ``training`` ("daylight" or "randomised") of ``city``: its noise and
     calibration drives in the training's look, its map images too (the randomised one's
     in ``args.randomised_map``)."""
-    looks = TRAININGS[training]
-    map_looks = args.randomised_map if training == "randomised" else looks
+    map_looks, looks = training_looks(training, args.randomised_map)
     env = make_env(args, city, map_looks)
     noise_env = env if map_looks == looks else make_env(args, city, looks)
     with warnings.catch_warnings():  # GSE's eigen-gap warning on a thin tube of poses

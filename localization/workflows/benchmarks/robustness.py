@@ -63,6 +63,7 @@ from agents.sources import make_pose_env
 from envs.conditions import PRESETS
 from localization.loading import load_localizer
 from localization.localizer import AppearanceLocalizer
+from localization.workflows.benchmarks.appearance import training_looks
 from localization.workflows.benchmarks.robustness_report import (
     DEFAULT_STEPS,
     HELD_OUT_CITIES,
@@ -227,8 +228,7 @@ def run_fit_task(task: FitTask) -> float:
     """Fit the task's street-wide localizer, save it; return the seconds taken."""
     args, t0 = task.config, time.perf_counter()
     daylight = task.training == "daylight"
-    looks = "default" if daylight else "random"  # of the noise and calibration drives
-    map_looks = looks if daylight else args.randomised_map
+    map_looks, looks = training_looks(task.training, args.randomised_map)
     env = _fit_env(args, task.city, map_looks)
     noise_env = env if map_looks == looks else _fit_env(args, task.city, looks)
     with warnings.catch_warnings():  # GSE's eigen-gap warning on thin tubes of poses

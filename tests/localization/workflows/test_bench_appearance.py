@@ -15,6 +15,7 @@ from localization.workflows.benchmarks import BENCHMARKS, benchmark
 from localization.workflows.benchmarks.appearance import (
     AppearanceBenchConfig,
     run_appearance_bench,
+    training_looks,
     single_image_scores,
 )
 from localization.workflows.benchmarks.appearance_report import single_target
@@ -40,6 +41,14 @@ def test_single_image_scores_use_both_thresholds_and_count_misses():
     s = single_image_scores(Fixed(pred), None, truth)
     assert s["within"] == pytest.approx([0.2, 0.6, 0.8])
     assert math.isinf(s["pos_err"][4])
+
+
+def test_only_the_randomised_map_follows_randomised_map():
+    """(map looks, noise-drive looks): the noise of the randomised localizer is always learnt
+    under randomised conditions, the daylight one never leaves daylight."""
+    assert training_looks("daylight", "random") == ("default", "default")
+    assert training_looks("randomised", "default") == ("default", "random")
+    assert training_looks("randomised", "random") == ("random", "random")
 
 
 def test_targets_are_the_issues():

@@ -42,9 +42,10 @@ def test_noise_env_drives_the_noise_model_and_not_the_map():
         plain, other = _fit(env), _fit(env, noise_env=dusk)
         assert plain.fingerprint_ == other.fingerprint_  # the same daylight map images
         assert not np.allclose(plain.noise_["representation"], other.noise_["representation"])
+        other_city = gym.make("AppearanceNav-v0", scene_seed=1)
         with pytest.raises(ValueError, match="noise_env must show the same city"):
-            fit_city_localizer(env, n_train=400, n_drive=200,
-                               noise_env=gym.make("AppearanceNav-v0", scene_seed=1))
+            fit_city_localizer(env, n_train=400, n_drive=200, noise_env=other_city)
+        other_city.close()
     finally:
         env.close()
         dusk.close()
