@@ -37,7 +37,7 @@ import numpy as np
 from localization._validation import check_array, check_int, check_real
 
 __all__ = ["DEFAULT", "MAX_MOVERS", "PRESETS", "Conditions", "ConditionsSpec", "draw_random",
-           "parse_conditions"]
+           "experience_looks", "parse_conditions"]
 
 Vec3 = tuple[float, float, float]
 MAX_MOVERS = 16  # vehicles (and pedestrians) at most
@@ -274,11 +274,20 @@ def _check_field(key: str, value: Any) -> Any:
     raise ValueError(f"unknown conditions key {key!r}")  # unreachable: keys checked before
 
 
-def draw_random(rng: np.random.Generator) -> Conditions:
-    """A random episode look: a lighting family of :data:`RANDOM_BASES` with its sun turned,
-    recoloured and dimmed, fog distances stretched, and (each half of the time) a seasonal
-    shift and camera effects; no traffic (add it with overrides)."""
-    base = PRESETS[str(rng.choice(RANDOM_BASES))]
+def draw_random(rng: np.random.Generator, family: str | None = None) -> Conditions:
+    """A random episode look: a lighting family of :data:`RANDOM_BASES` (drawn, or
+    ``family``) with its sun turned, recoloured and dimmed, fog distances stretched, and (each
+    half of the time) a seasonal shift and camera effects; no traffic (add it with
+    overrides).
+
+    Raises
+    ------
+    ValueError
+        If ``family`` is not one of :data:`RANDOM_BASES`.
+    """
+    if family is not None and family not in RANDOM_BASES:
+        raise ValueError(f"family must be one of {RANDOM_BASES}, got {family!r}")
+    base = PRESETS[str(rng.choice(RANDOM_BASES)) if family is None else family]
     az, tilt = rng.uniform(-math.pi / 3, math.pi / 3), rng.uniform(0.7, 1.4)
     x, y, z = base.sun_direction
     c, s = math.cos(az), math.sin(az)
@@ -304,3 +313,12 @@ def draw_random(rng: np.random.Generator) -> Conditions:
                       noise=float(rng.uniform(0.0, 0.04)),
                       motion_blur=float(rng.uniform(0.0, 0.06)))
     return dataclasses.replace(base, **fields)
+
+
+def experience_looks(seed: int) -> list[Conditions]:
+    """Looks of a map of several experiences (``ExperienceLocalizer``): today's daylight and
+    one draw (:func:`draw_random`, seeded by ``seed``) of each other lighting family of
+    :data:`RANDOM_BASES`."""
+    rng = np.random.default_rng(seed)
+    return [DEFAULT, *(draw_random(rng, family) for family in RANDOM_BASES
+                       if family != "default")]

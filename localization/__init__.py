@@ -10,6 +10,7 @@ The public names, grouped by layer (imports flow one way, top to bottom)::
     filtering     PoseEKF, BeliefFilter, ParticleBelief, noise models
     localizer     AppearanceLocalizer, city_info, OtherCityError
     districts     DistrictLocalizer (one localizer per district of a large city)
+    experiences   ExperienceLocalizer (one localizer per look: day, dusk, night, ...)
     wrappers      BeliefWrapper, OracleWrapper, DeadReckoningWrapper
     workflows     fit_city_localizer, track_route, ... (import the simulator)
 
@@ -50,6 +51,7 @@ _LAZY = {
     "AppearanceLocalizer": "localizer", "MEASUREMENTS": "localizer",
     "OtherCityError": "localizer", "city_info": "localizer",
     "DistrictLocalizer": "districts", "load_localizer": "loading",
+    "ExperienceLocalizer": "experiences",
     "BeliefWrapper": "wrappers", "OracleWrapper": "wrappers",
     "DeadReckoningWrapper": "wrappers",
     # workflows (import the simulator)
@@ -64,6 +66,7 @@ __all__ = [
     "DeadReckoningWrapper",
     "DistrictLocalizer",
     "EfficientNetFeatures",
+    "ExperienceLocalizer",
     "FeatureExtractor",
     "FunctionMeasurement",
     "GSERegressor",

@@ -31,7 +31,8 @@ def save_districts(loc: Any, path: str | Path) -> None:
         districts[f"district/{k}"] = np.frombuffer(buf.getvalue(), dtype=np.uint8)
     pnb = loc.process_noise_body_
     settings = {
-        "format": FORMAT, "params": loc.get_params(), "n_districts": len(loc.districts_),
+        "format": getattr(loc, "FORMAT", FORMAT), "params": loc.get_params(),
+        "n_districts": len(loc.districts_), "labels": list(getattr(loc, "labels_", [])),
         "n_features": loc.n_features_,
         "arrays": {a: np.asarray(getattr(loc, a)).tolist() for a in _ARRAYS},
         "process_noise_body": None if pnb is None else np.asarray(pnb).tolist(),
@@ -43,16 +44,20 @@ def save_districts(loc: Any, path: str | Path) -> None:
 def load_districts(cls: type, path: str | Path) -> Any:
     """Rebuild a DistrictLocalizer written by :func:`save_districts`; FileNotFoundError if
     there is no such file, ValueError (naming the file) if it is corrupted or incomplete."""
-    _, settings, data = read_file(path, "DistrictLocalizer")
-    if settings.get("format") != FORMAT:
-        raise ValueError(f"{path}: unknown format {settings.get('format')!r} (want {FORMAT})")
+    _, settings, data = read_file(path, cls.__name__)
+    want = getattr(cls, "FORMAT", FORMAT)
+    if settings.get("format") != want:
+        raise ValueError(f"{path}: unknown format {settings.get('format')!r} (want {want})")
     try:
         params = dict(settings["params"])
-        params["grid"] = tuple(params["grid"])
+        if "grid" in params:
+            params["grid"] = tuple(params["grid"])
         loc = cls(**params)
         for a in _ARRAYS:
             setattr(loc, a, np.asarray(settings["arrays"][a]))
         loc.n_features_ = int(settings["n_features"])
+        if settings.get("labels"):
+            loc.labels_ = [str(label) for label in settings["labels"]]
         pnb = settings["process_noise_body"]
         loc.process_noise_body_ = None if pnb is None else np.asarray(pnb, dtype=np.float64)
         loc.consistency_ = {k: np.asarray(v, dtype=np.float64)
@@ -63,7 +68,7 @@ def load_districts(cls: type, path: str | Path) -> Any:
                            name=f"{path} (district {k})")
             for k in range(int(settings["n_districts"]))]
     except (ValueError, KeyError, TypeError, AttributeError) as err:
-        raise ValueError(f"{path}: corrupted or incomplete DistrictLocalizer "
+        raise ValueError(f"{path}: corrupted or incomplete {cls.__name__} "
                          f"({type(err).__name__}: {err})") from err
     loc._set_views()
     return loc

@@ -3,7 +3,9 @@ control gains from a recorded drive, R pooled over the districts for the pose-li
 and per district for the features, and the consistency of the hand-over filter.
 
 The host class provides ``districts_``, ``_views``, ``cells_``, ``overlap``,
-``n_features_``, ``district_of``, ``transform``, ``check_ready`` and ``_check_fitted``.
+``n_features_``, ``district_of``, ``owners``, ``transform``, ``check_ready`` and
+``_check_fitted``; an :class:`~localization.experiences.ExperienceLocalizer` (one map per
+look) overrides ``_region``: a look's features' R comes from the frames it measured.
 """
 
 from __future__ import annotations
@@ -19,15 +21,25 @@ from localization.filtering.calibration import calibrate_consistency
 from localization.geometry import Array
 from localization.localizer import AppearanceLocalizer
 
-__all__ = ["DistrictNoiseMixin", "inside"]
+__all__ = ["DistrictNoiseMixin", "inside", "provisional_noise"]
 
 _MIN_FRAMES = 200  # the correlation time's blocks (measurement_noise.correlation_time)
+_RESIDUAL_SAMPLE = 3000  # training images per map for its provisional noise
 
 
 def inside(xy: Array, box: Array, margin: float = 0.0) -> Array:
     """Mask (n,) of the points (n, 2) within ``margin`` of the box [x0, y0, x1, y1]."""
     return ((xy[:, 0] >= box[0] - margin) & (xy[:, 0] <= box[2] + margin)
             & (xy[:, 1] >= box[1] - margin) & (xy[:, 1] <= box[3] + margin))
+
+
+def provisional_noise(loc: AppearanceLocalizer, images: Any, poses: Array, seed: int) -> None:
+    """Without a K-fold noise model, give ``loc`` one from its training residuals (a sample
+    of at most 3000 of its training images, drawn with ``seed``)."""
+    if set(loc.noise_) != set(MEASUREMENTS):
+        sub = np.random.default_rng(seed).permutation(len(poses))[:_RESIDUAL_SAMPLE]
+        W = loc.transform(images[sub])
+        loc._set_noise(loc._residuals(loc.regressor_, W, poses[sub]), sequence=False)
 
 
 class DistrictNoiseMixin:
@@ -57,7 +69,7 @@ class DistrictNoiseMixin:
         thin = []
         for k, view in enumerate(self._views):
             res = dict(pooled)
-            region = inside(poses[:, :2], self.cells_[k], float(self.overlap))
+            region = self._region(k, W, poses)
             if region.sum() >= self._min_frames():
                 d = view.localizer
                 res["features"] = d._residuals(d.regressor_, view.select(W[region]),
@@ -74,6 +86,11 @@ class DistrictNoiseMixin:
         self.consistency_, self.quality_ = {}, {}
         return self
 
+    def _region(self, k: int, W: Array, poses: Array) -> Array:
+        """Mask (n,) of the drive's frames whose features' R district k learns: those within
+        ``overlap`` of its cell."""
+        return inside(poses[:, :2], self.cells_[k], float(self.overlap))
+
     def _min_frames(self) -> int:
         """Drive frames a district needs for its own features' R (a covariance of m
         components and its correlation time)."""
@@ -81,8 +98,9 @@ class DistrictNoiseMixin:
 
     def _pooled_residuals(self, W: Array, poses: Array) -> dict[str, Array]:
         """Body-frame "pose" and "representation" residuals (n, 3) of the drive's frames,
-        each from the district of its true pose (NaN rows out of its domain)."""
-        owner = np.array([self.district_of(p) for p in poses])
+        each from the map that measures it (:meth:`owners`: the district of its true pose;
+        NaN rows out of its domain)."""
+        owner = self.owners(poses, W)
         out = {k: np.full((len(poses), 3), np.nan) for k in ("pose", "representation")}
         for k, view in enumerate(self._views):
             rows = owner == k

@@ -40,8 +40,8 @@ from numpy.typing import ArrayLike
 from sklearn.exceptions import NotFittedError
 
 from localization._districts_io import load_districts, save_districts
-from localization._districts_noise import DistrictNoiseMixin, inside
-from localization._localizer_noise import MEASUREMENTS, check_data, novelty
+from localization._districts_noise import DistrictNoiseMixin, inside, provisional_noise
+from localization._localizer_noise import check_data, novelty
 from localization._validation import check_array, check_int, check_real
 from localization.geometry import Array, body_to_world
 from localization.gse.graph import DisconnectedGraphError
@@ -50,7 +50,6 @@ from localization.localizer import AppearanceLocalizer
 __all__ = ["District", "DistrictLocalizer", "district_cells"]
 
 _NOVELTY_SAMPLE = 500  # training images per district for its median novelty
-_RESIDUAL_SAMPLE = 3000  # training images per district for its provisional noise
 
 
 def district_cells(poses: ArrayLike, grid: tuple[int, int]) -> Array:
@@ -206,6 +205,12 @@ class DistrictLocalizer(DistrictNoiseMixin):
             self.districts_.append(loc)
             self.train_index_.append(keep)
             scales.append(self._novelty_scale(loc, images[keep]))
+        self._finish_fit(poses, scales)
+        return self
+
+    def _finish_fit(self, poses: Array, scales: list[float]) -> None:
+        """The fitted attributes shared by the maps, after ``districts_`` and
+        ``train_index_``."""
         self.n_train_ = np.array([len(i) for i in self.train_index_])
         self.novelty_scale_ = np.array(scales)
         self.n_features_ = int(self.districts_[0].regressor_.n_features_in_)
@@ -216,7 +221,6 @@ class DistrictLocalizer(DistrictNoiseMixin):
         self.control_gain_ = np.ones(2)
         self.process_noise_body_: Array | None = None
         self._set_views()
-        return self
 
     def _set_views(self) -> None:
         self._views = [District(self, k) for k in range(len(self.districts_))]
@@ -257,11 +261,7 @@ class DistrictLocalizer(DistrictNoiseMixin):
             raise ValueError(f"district {k} ({len(index)} training images): {err}; use "
                              "fewer districts, more overlap or more images") from err
         index = np.delete(index, loc.dropped_)
-        images, poses = images[index], poses[index]
-        if set(loc.noise_) != set(MEASUREMENTS):
-            sub = np.random.default_rng(k).permutation(len(poses))[:_RESIDUAL_SAMPLE]
-            W = loc.transform(images[sub])
-            loc._set_noise(loc._residuals(loc.regressor_, W, poses[sub]), sequence=False)
+        provisional_noise(loc, images[index], poses[index], k)
         return loc, index
 
     @staticmethod
@@ -335,9 +335,21 @@ class DistrictLocalizer(DistrictNoiseMixin):
         self._check_fitted()
         return self._views
 
-    def local(self, pose: ArrayLike) -> District:
-        """The district in charge at ``pose`` (the filter measures with it)."""
+    def local(self, pose: ArrayLike, w: ArrayLike | None = None) -> District:
+        """The district in charge at ``pose`` (the filter measures the image ``w`` with it;
+        a district does not depend on the image)."""
         return self._views[self.district_of(pose)]
+
+    def owners(self, poses: ArrayLike, W: ArrayLike) -> Array:
+        """The district that measures each frame (n,): the one whose cell holds its pose
+        (n, 3). ``W``, the frames' features (n, K m) or one image's (K m,) for every pose,
+        is not needed here (an :class:`~localization.experiences.ExperienceLocalizer`
+        chooses by it)."""
+        return self.districts_of(poses)
+
+    def _holds(self, k: int, x: Array) -> bool:
+        """Whether district k's psi* ``x`` (3,) lies in its own region."""
+        return bool(inside(x[None, :2], self.cells_[k], float(self.overlap))[0])
 
     def candidates(self, w: Array) -> list[tuple[float, int, Array]]:
         """(relative novelty, district, psi*) of every district whose psi*(w) lies in its own
@@ -348,7 +360,7 @@ class DistrictLocalizer(DistrictNoiseMixin):
             x = view.localizer.measure(wk, "pose")
             if not np.all(np.isfinite(x)):
                 continue
-            if not inside(x[None, :2], self.cells_[k], float(self.overlap))[0]:
+            if not self._holds(k, x):
                 continue
             u = float(novelty(view.localizer.regressor_, wk[None])[0])
             if np.isfinite(u):

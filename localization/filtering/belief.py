@@ -171,12 +171,14 @@ class BeliefFilter:
         if self.ekf is None:
             raise RuntimeError("the belief is not initialised: call reset() first")
 
-    def _local(self, x: Array | None) -> tuple[Localizer, Any]:
-        """The localizer in charge at pose ``x`` and its measurement model: the localizer
-        itself, or for one with ``local(x)`` (a
-        :class:`~localization.districts.DistrictLocalizer`) the district at ``x``."""
+    def _local(self, x: Array | None, w: Array | None = None) -> tuple[Localizer, Any]:
+        """The localizer in charge at pose ``x`` for the image ``w`` and its measurement
+        model: the localizer itself, or for one with ``local(x, w)`` (a
+        :class:`~localization.districts.DistrictLocalizer`: the district at ``x``; an
+        :class:`~localization.experiences.ExperienceLocalizer`: the look most like ``w``)
+        that one."""
         local = getattr(self.localizer, "local", None)
-        view = self.localizer if x is None or not callable(local) else local(x)
+        view = self.localizer if x is None or not callable(local) else local(x, w)
         model = self._models.get(id(view))
         if model is None:
             options = {} if self.noise == "global" else {"noise": self.noise}
@@ -187,7 +189,7 @@ class BeliefFilter:
     def _measurement(self, x: Array, w: Array) -> tuple[Array, Any]:
         """The measurement z of image ``w`` and its model, by the localizer in charge at
         ``x``; the model has observed ``w``."""
-        view, model = self._local(x)
+        view, model = self._local(x, w)
         z = view.measure(w, self.measurement)
         observe = getattr(model, "observe", None)
         if callable(observe) and np.all(np.isfinite(z)):

@@ -74,7 +74,7 @@ class DistrictLikelihood:
         """Squared Mahalanobis distances d2 (N,) of the image at the particles ``X`` (N, 3),
         each by its district; NaN where that district's maps are undefined."""
         X = np.asarray(X, dtype=np.float64)
-        owner = self.localizer.districts_of(X)
+        owner = self.localizer.owners(X, w)
         d2 = np.full(len(X), np.nan)
         for k in np.unique(owner):
             rows = owner == k

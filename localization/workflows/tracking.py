@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -53,6 +53,7 @@ from envs.lanes import street_tour
 from envs.off_lane import OffLanePilot
 from localization._validation import check_real
 from localization.districts import DistrictLocalizer
+from localization.experiences import ExperienceLocalizer
 from localization.geometry import Array, wrap_angle
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer, city_info
 from localization.workflows.quality import quality_report, warn_quality
@@ -91,6 +92,7 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
                        quality_steps: int | None = None,
                        districts: tuple[int, int] | None = None, overlap: float = 4.0,
                        noise_env: gym.Env | None = None,
+                       experience_envs: Sequence[gym.Env] = (),
                        ) -> tuple[AppearanceLocalizer | DistrictLocalizer, dict[str, float]]:
     """Fit an :class:`AppearanceLocalizer` and its noise model on the env's city.
 
@@ -130,6 +132,11 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
         Env of the noise, calibration and quality drives (default ``env``): the same city
         in other conditions, e.g. a map fitted on daylight images whose measurement noise
         is learnt under randomised conditions (``conditions="random"``).
+    experience_envs : sequence of gym.Env, optional
+        The same city in other looks (e.g. ``conditions=`` a dusk or a night draw): the map
+        becomes an :class:`~localization.experiences.ExperienceLocalizer`, one map per look
+        (``env``'s first, each of the same training poses; labels ``"<k>:<look name>"``),
+        and each image is measured by the look it resembles most.
 
     Returns
     -------
@@ -155,19 +162,25 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
     t0 = time.perf_counter()
     params = {"noise_folds": 0, **(localizer_params or {})}
     loc: AppearanceLocalizer | DistrictLocalizer = AppearanceLocalizer(**params)
-    if lanes == "free":
-        images, poses = collect_dataset(env, n_train, "coverage", seed=seed, progress=progress,
-                                        **(lane_options or {}))
-        images, poses = distinct_views(loc, images, poses)
-    else:
-        images, poses = collect_dataset(env, n_train, "lanes", seed=seed, progress=progress,
-                                        lanes=lanes, **(lane_options or {}))
+    looks = [env, *(_same_city(env, e, "experience_envs") for e in experience_envs)]
+    if districts is not None and len(looks) > 1:
+        raise ValueError("districts and experience_envs cannot be combined: fit one or the other")
+    parts = [_training_images(e, loc, n_train, lanes, seed, lane_options, progress)
+             for e in looks]
+    images = np.concatenate([p[0] for p in parts])
+    poses = np.concatenate([p[1] for p in parts])
     seconds["collect"] = time.perf_counter() - t0
     t0 = time.perf_counter()
+    where = {"camera": getattr(env.unwrapped, "camera_name", None), "city": city_info(env)}
     if districts is not None:
         loc = DistrictLocalizer(grid=districts, overlap=overlap, localizer_params=params)
-    loc.fit(images, poses, camera=getattr(env.unwrapped, "camera_name", None),
-            city=city_info(env))
+    if len(looks) > 1:
+        names = [f"{k}:{e.unwrapped.conditions.name}" for k, e in enumerate(looks)]
+        labels = np.repeat(names, [len(p[1]) for p in parts])
+        loc = ExperienceLocalizer(localizer_params=params).fit(images, poses,
+                                                               experiences=labels, **where)
+    else:
+        loc.fit(images, poses, **where)
     seconds["fit"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     fit_city_noise(drive_env, loc, lanes, n_drive, seed, calibrate_on_belief, measurements,
@@ -185,14 +198,28 @@ def fit_city_localizer(env: gym.Env, n_train: int = 6000, lanes: str = "route",
     return loc, seconds
 
 
-def _same_city(env: gym.Env, noise_env: gym.Env) -> gym.Env:
-    """``noise_env`` after checking it shows ``env``'s city (ValueError otherwise)."""
-    theirs, ours = city_info(noise_env), city_info(env)
+def _training_images(env: gym.Env, loc: AppearanceLocalizer, n_train: int, lanes: str,
+                     seed: int, lane_options: dict[str, Any] | None, progress: bool
+                     ) -> tuple[NDArray[np.uint8], Array]:
+    """The map's images of one env: around its lanes, or over the whole street surface
+    (``lanes="free"``, less views ``loc`` cannot tell apart)."""
+    if lanes == "free":
+        images, poses = collect_dataset(env, n_train, "coverage", seed=seed, progress=progress,
+                                        **(lane_options or {}))
+        return distinct_views(loc, images, poses)
+    return collect_dataset(env, n_train, "lanes", seed=seed, progress=progress, lanes=lanes,
+                           **(lane_options or {}))
+
+
+def _same_city(env: gym.Env, other: gym.Env, name: str = "noise_env") -> gym.Env:
+    """``other`` (the argument ``name``) after checking it shows ``env``'s city (ValueError
+    otherwise)."""
+    theirs, ours = city_info(other), city_info(env)
     if theirs != ours:
-        raise ValueError("noise_env must show the same city as env, got scene_seed "
+        raise ValueError(f"{name} must show the same city as env, got scene_seed "
                          f"{theirs['scene_seed']} (city_size {theirs['city_size']}) against "
                          f"{ours['scene_seed']} ({ours['city_size']})")
-    return noise_env
+    return other
 
 
 def street_train_size(env: gym.Env, density: float) -> int:

@@ -54,6 +54,7 @@ import mujoco
 import numpy as np
 from tqdm import tqdm
 
+from envs.conditions import experience_looks
 from envs.datasets import collect_dataset
 from localization.geometry import wrap_angle
 from localization.workflows.benchmarks.appearance_report import markdown
@@ -65,13 +66,14 @@ from localization.workflows.tracking import (
 )
 
 __all__ = ["FEATURES", "RANDOMISED_MAPS", "THRESHOLDS", "AppearanceBenchConfig", "OcclusionRecorder",
-           "run_appearance_bench", "training_looks"]
+           "fit_looks", "map_conditions", "run_appearance_bench", "training_looks"]
 
 #: (metres, degrees) of the visual-localization benchmarks
 THRESHOLDS = ((0.25, 2.0), (0.5, 5.0), (5.0, 10.0))
 TRAININGS = {"daylight": "default", "randomised": "random"}
-#: looks of the randomised localizer's map images (``--appearance-randomised-map``)
-RANDOMISED_MAPS = ("random", "default")
+#: looks of the randomised localizer's map images (``--appearance-randomised-map``): each
+#: image its own random look, daylight, or one map per look (:func:`map_conditions`)
+RANDOMISED_MAPS = ("random", "default", "experiences")
 
 
 def training_looks(training: str, randomised_map: str) -> tuple[str, str]:
@@ -80,6 +82,34 @@ def training_looks(training: str, randomised_map: str) -> tuple[str, str]:
     ``randomised_map`` (one of :data:`RANDOMISED_MAPS`)."""
     looks = TRAININGS[training]
     return (randomised_map if training == "randomised" else looks), looks
+
+
+def map_conditions(map_looks: str, city: int) -> list[Any]:
+    """Conditions of the map's envs: ``[map_looks]``, or for "experiences" today's daylight
+    and one draw of each other lighting family of the randomisation
+    (:func:`envs.conditions.experience_looks`, seeded by the city): an
+    :class:`~localization.experiences.ExperienceLocalizer`."""
+    return list(experience_looks(city)) if map_looks == "experiences" else [map_looks]
+
+
+def fit_looks(make: Any, city: int, map_looks: str, looks: str, **fit: Any) -> Any:
+    """:func:`fit_city_localizer` of ``city`` with its map in ``map_looks``
+    (:func:`map_conditions`) and its noise and calibration drives in ``looks``; ``make(c)``
+    makes the city's env in conditions c; the envs are closed after."""
+    maps = [make(c) for c in map_conditions(map_looks, city)]
+    noise_env = maps[0] if map_looks == looks else make(looks)
+    try:
+        with warnings.catch_warnings():  # GSE's eigen-gap warning on thin tubes of poses
+            warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
+            warnings.filterwarnings("ignore", message=".*quality.*")
+            loc, _ = fit_city_localizer(maps[0], noise_env=noise_env, experience_envs=maps[1:],
+                                        calibrate_on_belief=False,
+                                        measurements=("representation",), quality_steps=0,
+                                        **fit)
+    finally:
+        for env in {id(e): e for e in [*maps, noise_env]}.values():
+            env.close()
+    return loc
 
 
 #: feature extractors the benchmark compares (``--appearance-features``)
@@ -110,8 +140,9 @@ class AppearanceBenchConfig:
                 "localization.features.weights)"})
     randomised_map: str = field(default="random", metadata={
         "help": "conditions of the randomised localizer's map images: random (every image "
-                "its own look) or default (daylight images; its noise and calibration drives "
-                "stay under randomised conditions)"})
+                "its own look), default (daylight images; its noise and calibration drives "
+                "stay under randomised conditions) or experiences (one map per look: daylight "
+                "and a draw of each other lighting family, ExperienceLocalizer)"})
     n_components: int = field(default=64, metadata={
         "help": "PixelPCA components (small_cnn: PCA components of its embedding)"})
     normalize: str = field(default="channels", metadata={
@@ -178,7 +209,7 @@ class OcclusionRecorder(gym.Wrapper):
         super().close()
 
 
-def make_env(args: AppearanceBenchConfig, city: int, conditions: str) -> gym.Env:
+def make_env(args: AppearanceBenchConfig, city: int, conditions: Any) -> gym.Env:
     return gym.make("AppearanceNav-v0", scene_seed=city, conditions=conditions,
                     image_size=(args.image_size, args.image_size),
                     motion_noise=args.motion_noise, max_episode_steps=None)
@@ -210,18 +241,9 @@ def fit(args: AppearanceBenchConfig, city: int, training: str) -> Any:
     calibration drives in the training's look, its map images too (the randomised one's
     in ``args.randomised_map``)."""
     map_looks, looks = training_looks(training, args.randomised_map)
-    env = make_env(args, city, map_looks)
-    noise_env = env if map_looks == looks else make_env(args, city, looks)
-    with warnings.catch_warnings():  # GSE's eigen-gap warning on a thin tube of poses
-        warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
-        warnings.filterwarnings("ignore", message=".*quality.*")
-        loc, _ = fit_city_localizer(
-            env, n_train=args.n_train, lanes=args.lanes, n_drive=args.n_drive, seed=args.seed,
-            localizer_params=localizer_params(args), calibrate_on_belief=False,
-            measurements=("representation",), quality_steps=0, noise_env=noise_env)
-    env.close()
-    noise_env.close()
-    return loc
+    return fit_looks(lambda c: make_env(args, city, c), city, map_looks, looks,
+                     n_train=args.n_train, lanes=args.lanes, n_drive=args.n_drive,
+                     seed=args.seed, localizer_params=localizer_params(args))
 
 
 def single_image_scores(loc: Any, images: np.ndarray, poses: np.ndarray) -> dict[str, Any]:

@@ -46,7 +46,6 @@ import dataclasses
 import json
 import platform
 import time
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -63,7 +62,7 @@ from agents.sources import make_pose_env
 from envs.conditions import PRESETS
 from localization.loading import load_localizer
 from localization.localizer import AppearanceLocalizer
-from localization.workflows.benchmarks.appearance import training_looks
+from localization.workflows.benchmarks.appearance import fit_looks, training_looks
 from localization.workflows.benchmarks.robustness_report import (
     DEFAULT_STEPS,
     HELD_OUT_CITIES,
@@ -72,7 +71,6 @@ from localization.workflows.benchmarks.robustness_report import (
 )
 from localization.workflows.benchmarks.street_features import localizer_features
 from localization.workflows.parallel import RAY_ADDRESS_HELP, WORKERS_HELP, map_tasks, worker_env
-from localization.workflows.tracking import fit_city_localizer
 
 __all__ = [
     "AGENTS",
@@ -134,8 +132,9 @@ class RobustnessConfig:
     randomised_map: str = field(default="default", metadata={
         "help": "conditions of the randomised localizer's map images: default (daylight "
                 "images; its features and its noise and calibration drives stay under "
-                "randomised conditions; chosen on tuning cities 13-14) or random (every image "
-                "its own look)"})
+                "randomised conditions; chosen on tuning cities 13-14), random (every image "
+                "its own look) or experiences (one map per look: daylight and a draw of each "
+                "other lighting family, ExperienceLocalizer)"})
     n_drive: int = field(default=1500, metadata={"help": "steps of each noise-calibration drive"})
     max_steps: int = field(default=600, metadata={
         "help": "episode truncation (steps); 1.5x the agents' default 400: the longest "
@@ -218,7 +217,7 @@ class FitTask:
     training: str
 
 
-def _fit_env(args: RobustnessConfig, city: int, conditions: str) -> gym.Env:
+def _fit_env(args: RobustnessConfig, city: int, conditions: Any) -> gym.Env:
     return gym.make("AppearanceNav-v0", scene_seed=city, conditions=conditions,
                     image_size=(args.image_size, args.image_size), motion_noise=args.motion_noise,
                     max_episode_steps=None)
@@ -229,19 +228,10 @@ def run_fit_task(task: FitTask) -> float:
     args, t0 = task.config, time.perf_counter()
     daylight = task.training == "daylight"
     map_looks, looks = training_looks(task.training, args.randomised_map)
-    env = _fit_env(args, task.city, map_looks)
-    noise_env = env if map_looks == looks else _fit_env(args, task.city, looks)
-    with warnings.catch_warnings():  # GSE's eigen-gap warning on thin tubes of poses
-        warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
-        warnings.filterwarnings("ignore", message=".*quality.*")
-        loc, _ = fit_city_localizer(env, n_train=args.n_train if daylight
-                                    else args.n_train_randomised, lanes="streets",
-                                    n_drive=args.n_drive, seed=task.city,
-                                    localizer_params=localizer_params(args, task.training),
-                                    calibrate_on_belief=False, measurements=("representation",),
-                                    quality_steps=0, noise_env=noise_env)
-    env.close()
-    noise_env.close()
+    loc = fit_looks(lambda c: _fit_env(args, task.city, c), task.city, map_looks, looks,
+                    n_train=args.n_train if daylight else args.n_train_randomised,
+                    lanes="streets", n_drive=args.n_drive, seed=task.city,
+                    localizer_params=localizer_params(args, task.training))
     path = localizer_path(args, task.city, task.training)
     path.parent.mkdir(parents=True, exist_ok=True)
     loc.save(path)

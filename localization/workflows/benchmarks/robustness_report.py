@@ -23,6 +23,9 @@ BELIEFS = ("ekf", "particles")
 
 def _map_images(conditions: str) -> str:
     """How the randomised localizer's map images look."""
+    if conditions == "experiences":
+        return ("map images per look (daylight, dusk, night, overcast, fog draws), noise "
+                "under randomised conditions")
     return ("daylight map images, noise under randomised conditions" if conditions == "default"
             else "images in randomised conditions")
 

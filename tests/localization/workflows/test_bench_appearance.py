@@ -15,8 +15,8 @@ from localization.workflows.benchmarks import BENCHMARKS, benchmark
 from localization.workflows.benchmarks.appearance import (
     AppearanceBenchConfig,
     run_appearance_bench,
-    training_looks,
     single_image_scores,
+    training_looks,
 )
 from localization.workflows.benchmarks.appearance_report import single_target
 
@@ -49,6 +49,17 @@ def test_only_the_randomised_map_follows_randomised_map():
     assert training_looks("daylight", "random") == ("default", "default")
     assert training_looks("randomised", "default") == ("default", "random")
     assert training_looks("randomised", "random") == ("random", "random")
+    assert training_looks("randomised", "experiences") == ("experiences", "random")
+
+
+def test_experience_maps_are_daylight_and_a_draw_of_each_other_family():
+    from localization.workflows.benchmarks.appearance import map_conditions
+
+    assert map_conditions("default", 21) == ["default"]
+    looks = map_conditions("experiences", 21)
+    assert [c.name for c in looks] == ["default", "random:dusk", "random:night",
+                                       "random:overcast", "random:fog"]
+    assert looks == map_conditions("experiences", 21) != map_conditions("experiences", 22)
 
 
 def test_targets_are_the_issues():

@@ -1,5 +1,5 @@
-"""fit_city_localizer names the argument to change when its noise drive is too short, and
-learns its noise where ``noise_env`` says."""
+"""fit_city_localizer names the argument to change when its noise drive is too short,
+learns its noise where ``noise_env`` says, and fits one map per look of ``experience_envs``."""
 
 from __future__ import annotations
 
@@ -49,3 +49,32 @@ def test_noise_env_drives_the_noise_model_and_not_the_map():
     finally:
         env.close()
         dusk.close()
+
+
+def test_experience_envs_give_one_map_per_look():
+    """Each experience env adds a map of the same training poses in its look."""
+    from envs.conditions import experience_looks
+    from localization.experiences import ExperienceLocalizer
+
+    env, night = make_env(), make_env(conditions=experience_looks(0)[2])
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            loc, _ = fit_city_localizer(
+                env, n_train=400, lanes="route", n_drive=200,
+                localizer_params={"features_params": {"n_components": 8}},
+                calibrate_on_belief=False, measurements=("representation",), quality_steps=0,
+                experience_envs=[night])
+        assert isinstance(loc, ExperienceLocalizer)
+        assert loc.labels_ == ["0:default", "1:random:night"]
+        assert loc.n_train_[0] >= 390 and loc.n_train_[1] >= 390  # 400 poses, each look
+        other_city = gym.make("AppearanceNav-v0", scene_seed=1)
+        with pytest.raises(ValueError, match="experience_envs must show the same city"):
+            fit_city_localizer(env, n_train=400, n_drive=200, experience_envs=[other_city])
+        with pytest.raises(ValueError, match="districts and experience_envs"):
+            fit_city_localizer(env, n_train=400, n_drive=200, experience_envs=[night],
+                               districts=(2, 1))
+        other_city.close()
+    finally:
+        env.close()
+        night.close()
