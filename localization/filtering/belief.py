@@ -173,10 +173,8 @@ class BeliefFilter:
 
     def _local(self, x: Array | None, w: Array | None = None) -> tuple[Localizer, Any]:
         """The localizer in charge at pose ``x`` for the image ``w`` and its measurement
-        model: the localizer itself, or for one with ``local(x, w)`` (a
-        :class:`~localization.districts.DistrictLocalizer`: the district at ``x``; an
-        :class:`~localization.experiences.ExperienceLocalizer`: the look most like ``w``)
-        that one."""
+        model: the localizer, or its ``local(x, w)`` (a district's map at ``x``, or the
+        look of an :class:`~localization.experiences.ExperienceLocalizer` most like ``w``)."""
         local = getattr(self.localizer, "local", None)
         view = self.localizer if x is None or not callable(local) else local(x, w)
         model = self._models.get(id(view))

@@ -1,8 +1,9 @@
 """The particle belief's likelihood and image proposals for a localizer of several maps.
 
 With a :class:`~localization.districts.DistrictLocalizer` (duck-typed here: ``views_``,
-``districts_of``, ``candidates``) every particle is weighed by the district whose cell holds
-it: the image's measurement by that district's maps at the particle's pose, with the
+``owners``, ``candidates``) every particle is weighed by the district whose cell holds it
+(with an :class:`~localization.experiences.ExperienceLocalizer`, every particle by the look
+the image resembles): the image's measurement by that district's maps at the particle's pose, with the
 pose-equivalent R the districts share ("pose", "representation"), so the distances of
 particles in different districts are on one scale. An image proposes psi* and the
 retrieved training poses of every district whose psi* lies in its own region: look-alike
@@ -72,7 +73,7 @@ class DistrictLikelihood:
 
     def distances(self, w: Array, X: Any) -> Array:
         """Squared Mahalanobis distances d2 (N,) of the image at the particles ``X`` (N, 3),
-        each by its district; NaN where that district's maps are undefined."""
+        each by the map that owns it (``localizer.owners``); NaN where that map is undefined."""
         X = np.asarray(X, dtype=np.float64)
         owner = self.localizer.owners(X, w)
         d2 = np.full(len(X), np.nan)
