@@ -13,10 +13,13 @@ packaged SmallCNN of random views of other cities on the whole image; on tuning 
 0.95 kidnapped, against 0.990 and 0.860 with PixelPCA, docs/benchmarks.md §11) and
 "randomised" for the presets: the packaged condition-randomised SmallCNN (on tuning city 11
 PixelPCA's single-image median error there was 5.0 m, the SmallCNN's 0.30 m, in daylight),
-its noise and calibration drives under ``conditions="random"``, its map images in daylight
-(``randomised_map="default"``: on tuning cities 13-14 the scripted agent on the EKF reached
-0.67-1.00 of its goals under the presets against 0.25-0.67 with a map of images each in its
-own look, docs/benchmarks.md §11). Then every
+its noise and calibration drives under ``conditions="random"``, its map one per look
+(``randomised_map="experiences"``, an
+:class:`~localization.experiences.ExperienceLocalizer` of daylight and a draw of each other
+lighting family: on tuning cities 13-14 the scripted agent on the EKF reached 1.00 of its
+goals under dusk, night, seasonal colours, overcast and exposure, 12 episodes each; with
+one daylight map 0.67-1.00, with a map of images each in its own look 0.25-0.67,
+docs/benchmarks.md §11). Then every
 (agent, pose source, condition) row runs ``episodes`` episodes per city from lane starts to
 random goals, the same reset seeds in every row:
 
@@ -129,12 +132,12 @@ class RobustnessConfig:
         "help": "features of the randomised localizer: small_cnn (the packaged SmallCNN trained "
                 "under randomised conditions on cities 100-119, PCA 64) or pixel_pca (the "
                 "localizer's default PixelPCA); chosen on tuning city 11"})
-    randomised_map: str = field(default="default", metadata={
-        "help": "conditions of the randomised localizer's map images: default (daylight "
-                "images; its features and its noise and calibration drives stay under "
-                "randomised conditions; chosen on tuning cities 13-14), random (every image "
-                "its own look) or experiences (one map per look: daylight and a draw of each "
-                "other lighting family, ExperienceLocalizer)"})
+    randomised_map: str = field(default="experiences", metadata={
+        "help": "conditions of the randomised localizer's map images: experiences (one map "
+                "per look: daylight and a draw of each other lighting family, "
+                "ExperienceLocalizer; chosen on tuning cities 13-14), default (daylight "
+                "images) or random (every image its own look); its features and its noise "
+                "and calibration drives are under randomised conditions either way"})
     n_drive: int = field(default=1500, metadata={"help": "steps of each noise-calibration drive"})
     max_steps: int = field(default=600, metadata={
         "help": "episode truncation (steps); 1.5x the agents' default 400: the longest "
@@ -153,14 +156,15 @@ class RobustnessConfig:
         "help": "where bench_robustness.json/.md and the localizers go"})
 
     def resolved(self) -> RobustnessConfig:
-        """The settings actually run (``quick``: one city, three conditions, small fits)."""
+        """The settings actually run (``quick``: one city, three conditions, small fits, one
+        daylight map for the presets)."""
         if not self.quick:
             return self
         return dataclasses.replace(
             self, cities=self.cities.split(",")[0], conditions="nominal,kidnap,night",
             episodes=2, image_size=32, n_train=600, n_train_randomised=600, n_drive=400,
             max_steps=60, kidnap_at=10, daylight_features="pixel_pca",
-            randomised_features="pixel_pca")
+            randomised_features="pixel_pca", randomised_map="default")
 
     def lists(self) -> dict[str, list[str]]:
         """cities, conditions, sources and agents as checked lists of names."""
