@@ -70,12 +70,11 @@ class DistrictNoiseMixin:
         for k, view in enumerate(self._views):
             res = dict(pooled)
             region = self._region(k, W, poses)
-            if region.sum() >= self._min_frames():
-                d = view.localizer
-                res["features"] = d._residuals(d.regressor_, view.select(W[region]),
-                                               poses[region])["features"]
-            else:
+            features = self._region_features(view, W[region], poses[region])
+            if features is None:
                 thin.append(f"{k} ({int(region.sum())} frames)")
+            else:
+                res["features"] = features
             view.localizer._set_noise(res, sequence=True)
             view.localizer.consistency_, view.localizer.quality_ = {}, {}
         if thin:
@@ -92,9 +91,18 @@ class DistrictNoiseMixin:
         return inside(poses[:, :2], self.cells_[k], float(self.overlap))
 
     def _min_frames(self) -> int:
-        """Drive frames a district needs for its own features' R (a covariance of m
-        components and its correlation time)."""
-        return max(2 * self.n_features_, _MIN_FRAMES)
+        """Finite drive residuals a district needs for its own features' R (a robust
+        covariance of m components needs 5 m, and its correlation time 200)."""
+        return max(5 * self.n_features_, _MIN_FRAMES)
+
+    def _region_features(self, view: Any, W: Array, poses: Array) -> Array | None:
+        """The features' residuals (n, m) of a map's drive frames (``W``: their concatenated
+        features), or None when fewer than :meth:`_min_frames` of them are finite."""
+        if len(poses) < self._min_frames():
+            return None
+        d = view.localizer
+        e = d._residuals(d.regressor_, view.select(W), poses)["features"]
+        return e if np.all(np.isfinite(e), axis=1).sum() >= self._min_frames() else None
 
     def _pooled_residuals(self, W: Array, poses: Array) -> dict[str, Array]:
         """Body-frame "pose" and "representation" residuals (n, 3) of the drive's frames,

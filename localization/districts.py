@@ -26,8 +26,8 @@ Noise (:meth:`DistrictLocalizer.fit_noise`): Q and the control gains from the dr
 the pose-like models ("pose", "representation": body-frame pose errors, comparable between
 districts) pooled over the drive's frames, each measured by the district of its true pose;
 the features' R per district from the drive's frames in its region (at least
-``max(2 m, 200)`` of them), else the district's in-sample training residuals (a ``RuntimeWarning``
-names those districts). Consistency is calibrated on the whole hand-over filter.
+``max(5 m, 200)`` finite residuals), else the district's in-sample training residuals (a
+``RuntimeWarning`` names those districts). Consistency is calibrated on the whole hand-over filter.
 """
 
 from __future__ import annotations

@@ -22,7 +22,8 @@ whose maps all cover the whole city and are chosen by the image, not the pose:
   (``local(x, w)``), and each particle is weighed by it.
 - Noise: Q and the control gains from the drive, the pose-like R pooled over the frames
   each measured by its chosen experience, and each experience's features' R from the drive
-  frames it was chosen for (its training residuals when fewer than ``max(2 m, 200)``).
+  frames it was chosen for (its training residuals when fewer than ``max(5 m, 200)`` of
+  them are finite).
 """
 
 from __future__ import annotations

@@ -172,3 +172,23 @@ def test_bad_inputs_are_named(exp, train):
         exp.experiences_of(np.zeros((2, 5)))
     with pytest.raises(ValueError, match="w must be"):
         exp.experience_of(np.zeros(3))
+
+
+def test_a_look_learns_its_features_r_only_from_enough_finite_residuals(exp, drive):
+    """A look's own features' R needs max(5 m, 200) finite drive residuals; fewer (e.g.
+    frames whose poses lie off its maps) keep its training residuals' R instead of failing the
+    covariance (a warning names it)."""
+    images, poses, _ = drive
+    W = exp.transform(images)
+    view = exp.views_[0]
+    assert exp._region_features(view, W, poses).shape == (len(poses), exp.n_features_)
+    assert exp._region_features(view, W[:150], poses[:150]) is None  # too few frames
+    far = poses.copy()
+    far[:60, :2] += 100.0  # poses off the map: no finite residual there, 181 of 241 left
+    assert exp._region_features(view, W, far) is None
+    env = make_env()
+    before = exp.districts_[1].noise_["features"].copy()
+    with pytest.warns(RuntimeWarning, match="features' R"):
+        exp.fit_noise(env.unwrapped.motion_model, *drive)  # the night look is barely chosen
+    np.testing.assert_array_equal(exp.districts_[1].noise_["features"], before)
+    env.close()
