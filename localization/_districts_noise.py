@@ -65,11 +65,12 @@ class DistrictNoiseMixin:
         for d in self.districts_:
             d.control_gain_, d.process_noise_body_ = self.control_gain_, self.process_noise_body_
         W = self.transform(images)
-        pooled = self._pooled_residuals(W, poses)
+        owner = self.owners(poses, W)
+        pooled = self._pooled_residuals(W, poses, owner)
         thin = []
         for k, view in enumerate(self._views):
             res = dict(pooled)
-            region = self._region(k, W, poses)
+            region = self._region(k, poses, owner)
             features = self._region_features(view, W[region], poses[region])
             if features is None:
                 thin.append(f"{k} ({int(region.sum())} frames)")
@@ -85,9 +86,9 @@ class DistrictNoiseMixin:
         self.consistency_, self.quality_ = {}, {}
         return self
 
-    def _region(self, k: int, W: Array, poses: Array) -> Array:
+    def _region(self, k: int, poses: Array, owner: Array) -> Array:
         """Mask (n,) of the drive's frames whose features' R district k learns: those within
-        ``overlap`` of its cell."""
+        ``overlap`` of its cell (``owner``: the map that measures each frame, unused)."""
         return inside(poses[:, :2], self.cells_[k], float(self.overlap))
 
     def _min_frames(self) -> int:
@@ -104,11 +105,10 @@ class DistrictNoiseMixin:
         e = d._residuals(d.regressor_, view.select(W), poses)["features"]
         return e if np.all(np.isfinite(e), axis=1).sum() >= self._min_frames() else None
 
-    def _pooled_residuals(self, W: Array, poses: Array) -> dict[str, Array]:
+    def _pooled_residuals(self, W: Array, poses: Array, owner: Array) -> dict[str, Array]:
         """Body-frame "pose" and "representation" residuals (n, 3) of the drive's frames,
-        each from the map that measures it (:meth:`owners`: the district of its true pose;
-        NaN rows out of its domain)."""
-        owner = self.owners(poses, W)
+        each from the map that measures it (``owner`` (n,), from :meth:`owners`: the
+        district of its true pose; NaN rows out of its domain)."""
         out = {k: np.full((len(poses), 3), np.nan) for k in ("pose", "representation")}
         for k, view in enumerate(self._views):
             rows = owner == k

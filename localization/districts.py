@@ -39,6 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from sklearn.exceptions import NotFittedError
 
+from localization._district_maps import District, transform_maps
 from localization._districts_io import load_districts, save_districts
 from localization._districts_noise import DistrictNoiseMixin, inside, provisional_noise
 from localization._localizer_noise import check_data, novelty
@@ -47,7 +48,7 @@ from localization.geometry import Array, body_to_world
 from localization.gse.graph import DisconnectedGraphError
 from localization.localizer import AppearanceLocalizer
 
-__all__ = ["District", "DistrictLocalizer", "district_cells"]
+__all__ = ["District", "DistrictLocalizer", "district_cells", "transform_maps"]
 
 _NOVELTY_SAMPLE = 500  # training images per district for its median novelty
 
@@ -61,54 +62,6 @@ def district_cells(poses: ArrayLike, grid: tuple[int, int]) -> Array:
     ys = np.linspace(lo[1], hi[1], grid[1] + 1)
     return np.array([[xs[i], ys[j], xs[i + 1], ys[j + 1]]
                      for j in range(grid[1]) for i in range(grid[0])])
-
-
-class District:
-    """The :class:`~localization.filtering.localizer_protocol.Localizer` of district ``index`` of a
-    :class:`DistrictLocalizer`: its localizer on its block of the concatenated features w
-    (K m,), with the parent's consistency."""
-
-    def __init__(self, parent: DistrictLocalizer, index: int) -> None:
-        self.parent, self.index = parent, index
-        self.localizer: AppearanceLocalizer = parent.districts_[index]
-        m = parent.n_features_
-        self._block = slice(index * m, (index + 1) * m)
-
-    @property
-    def control_gain_(self) -> Array:
-        """The parent's calibrated control gains (shared by the districts)."""
-        return self.parent.control_gain_
-
-    def select(self, w: ArrayLike) -> Array:
-        """This district's features (m,) out of the concatenated w (K m,)."""
-        return np.asarray(w, dtype=np.float64)[..., self._block]
-
-    def measure(self, w: ArrayLike, measurement: str) -> Array:
-        """The district's measurement of the named model from the concatenated w."""
-        return self.localizer.measure(self.select(w), measurement)
-
-    def measurement_model(self, measurement: str, alpha: ArrayLike | None = None,
-                          **options: Any) -> Any:
-        """The district's model; one that observes the image (heteroscedastic R) is given
-        this district's block of w."""
-        alpha = self.consistency(measurement) if alpha is None else alpha
-        model = self.localizer.measurement_model(measurement, alpha=alpha, **options)
-        observe = getattr(model, "observe", None)
-        if callable(observe):
-            model.observe = lambda w: observe(self.select(w))
-        return model
-
-    def consistency(self, measurement: str) -> Array:
-        return self.parent.consistency(measurement)
-
-    def process_noise(self, pose: ArrayLike, alpha: ArrayLike | None = None) -> Array:
-        return self.localizer.process_noise(pose, alpha)
-
-    def initial_belief(self, w: ArrayLike) -> tuple[Array, Array]:
-        return self.localizer.initial_belief(self.select(w))
-
-    def prior(self) -> tuple[Array, Array]:
-        return self.parent.prior()
 
 
 class DistrictLocalizer(DistrictNoiseMixin):
@@ -193,20 +146,27 @@ class DistrictLocalizer(DistrictNoiseMixin):
         grid = self._check_params()
         images, poses = check_data(images, poses)
         self.cells_ = district_cells(poses, grid)
+        groups = [np.flatnonzero(inside(poses[:, :2], cell, float(self.overlap)))
+                  for cell in self.cells_]
+        self._fit_maps(groups, images, poses, camera, city, "districts" if progress else None)
+        return self
+
+    def _fit_maps(self, groups: list[Array], images: Any, poses: Array, camera: str | None,
+                  city: dict[str, Any] | None, progress: str | None) -> None:
+        """One map per group of training images (indices; :meth:`_fit_district`), then the
+        attributes the maps share; ``progress``: the progress bar's name (None: no bar)."""
         params = {"noise_folds": 0, **(self.localizer_params or {})}
         self.districts_, self.train_index_, scales = [], [], []
-        bar = range(len(self.cells_))
-        if progress:
+        bar: Any = range(len(groups))
+        if progress is not None:
             from tqdm import tqdm
-            bar = tqdm(bar, desc="districts", unit="district")
+            bar = tqdm(bar, desc=progress, unit=progress.rstrip("s"))
         for k in bar:
-            keep = np.flatnonzero(inside(poses[:, :2], self.cells_[k], float(self.overlap)))
-            loc, keep = self._fit_district(k, images, poses, keep, camera, city, params)
+            loc, keep = self._fit_district(k, images, poses, groups[k], camera, city, params)
             self.districts_.append(loc)
             self.train_index_.append(keep)
             scales.append(self._novelty_scale(loc, images[keep]))
         self._finish_fit(poses, scales)
-        return self
 
     def _finish_fit(self, poses: Array, scales: list[float]) -> None:
         """The fitted attributes shared by the maps, after ``districts_`` and
@@ -303,9 +263,9 @@ class DistrictLocalizer(DistrictNoiseMixin):
         self.districts_[0].check_city(city, allow_other_city=allow_other_city)
 
     def transform(self, images: ArrayLike) -> Array:
-        """Features of every district side by side, shape (n, K m)."""
+        """Features of every district side by side, shape (n, K m) (:func:`transform_maps`)."""
         self._check_fitted()
-        return np.concatenate([d.transform(images) for d in self.districts_], axis=1)
+        return np.concatenate(transform_maps(self.districts_, images), axis=1)
 
     def _check_w(self, w: ArrayLike) -> Array:
         w = check_array(w, "w").reshape(-1)

@@ -124,24 +124,13 @@ class ExperienceLocalizer(DistrictLocalizer):
         index, self.labels_ = check_labels(experiences, len(poses))
         xy = poses[:, :2]
         self.cells_ = np.tile(np.r_[xy.min(axis=0), xy.max(axis=0)], (len(self.labels_), 1))
-        params = {"noise_folds": 0, **(self.localizer_params or {})}
-        self.districts_, self.train_index_, scales = [], [], []
-        bar: Any = range(len(self.labels_))
-        if progress:
-            from tqdm import tqdm
-            bar = tqdm(bar, desc="experiences", unit="experience")
-        for k in bar:
-            loc, keep = self._fit_experience(k, images, poses, np.flatnonzero(index == k),
-                                             camera, city, params)
-            self.districts_.append(loc)
-            self.train_index_.append(keep)
-            scales.append(self._novelty_scale(loc, images[keep]))
-        self._finish_fit(poses, scales)
+        groups = [np.flatnonzero(index == k) for k in range(len(self.labels_))]
+        self._fit_maps(groups, images, poses, camera, city, "experiences" if progress else None)
         return self
 
-    def _fit_experience(self, k: int, images: Any, poses: Array, index: Array,
-                        camera: str | None, city: dict[str, Any] | None,
-                        params: dict[str, Any]) -> tuple[AppearanceLocalizer, Array]:
+    def _fit_district(self, k: int, images: Any, poses: Array, index: Array,  # type: ignore[override]
+                      camera: str | None, city: dict[str, Any] | None,
+                      params: dict[str, Any]) -> tuple[AppearanceLocalizer, Array]:
         """Experience k's localizer on the training images ``index`` and the indices it
         kept (as :meth:`DistrictLocalizer._fit_district`)."""
         try:
@@ -182,8 +171,16 @@ class ExperienceLocalizer(DistrictLocalizer):
         return np.where(np.isfinite(U).any(axis=1), np.argmin(U, axis=1), 0)
 
     def experience_of(self, w: ArrayLike) -> int:
-        """:meth:`experiences_of` of one image's features w (K m,)."""
-        return int(self.experiences_of(self._check_w(w)[None])[0])
+        """:meth:`experiences_of` of one image's features w (K m,); the last image's choice
+        is kept, so the filter's calls for one image (its measurement, its particles' weights)
+        choose once."""
+        w = self._check_w(w)
+        key = w.tobytes()
+        if self._last_choice is not None and self._last_choice[0] == key:
+            return self._last_choice[1]
+        k = int(self.experiences_of(w[None])[0])
+        self._last_choice = (key, k)
+        return k
 
     # ------------------------------------------------------ belief interface
     def local(self, pose: ArrayLike, w: ArrayLike | None = None) -> District:
@@ -204,6 +201,10 @@ class ExperienceLocalizer(DistrictLocalizer):
         """Every experience maps the whole city."""
         return True
 
-    def _region(self, k: int, W: Array, poses: Array) -> Array:
+    def _region(self, k: int, poses: Array, owner: Array) -> Array:
         """The drive frames experience k was chosen for (its features' R)."""
-        return self.owners(poses, W) == k
+        return owner == k
+
+    def _set_views(self) -> None:
+        super()._set_views()
+        self._last_choice: tuple[bytes, int] | None = None

@@ -337,6 +337,24 @@ class AppearanceLocalizer(NoiseModelMixin, BeliefInterfaceMixin, MapMixin):
         crop = self._crop(self.check_images(images))
         return self.features_.transform(crop)
 
+    def stage_key(self) -> tuple[Any, ...] | None:
+        """Identity of the feature extractor's first stage on this localizer's image rows
+        (:meth:`FeatureExtractor.stage_key`): localizers with equal keys give equal
+        :meth:`embed` outputs. None: the extractor has no stage to share."""
+        self._check_fitted()
+        key = self.features_.stage_key()
+        if key is None:
+            return None
+        return key, tuple(float(r) for r in self.rows), tuple(self.image_size_)
+
+    def embed(self, images: ArrayLike) -> Array:
+        """The first stage of :meth:`transform`: ``transform(X) == head(embed(X))``."""
+        return self.features_.embed(self._crop(self.check_images(images)))
+
+    def head(self, embedded: ArrayLike) -> Array:
+        """The rest of :meth:`transform`: features w (n, m) of :meth:`embed`'s output."""
+        return self.features_.head(np.asarray(embedded))
+
     def predict(self, images: ArrayLike) -> Array:
         """psi*(X): poses (n, 3) of images (n, H, W, 3); NaN rows for images whose
         features lie outside the training domain."""

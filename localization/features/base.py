@@ -118,12 +118,34 @@ class FeatureExtractor(TransformerMixin, BaseEstimator):
 
     def transform(self, images: np.ndarray) -> np.ndarray:
         """Features of uint8 images (n, H, W, 3) -> float64 array (n, n_features_out_)."""
+        return self._checked(self._transform(self._checked_images(images)))
+
+    def _checked_images(self, images: np.ndarray) -> np.ndarray:
         self._check_fitted()
         images = check_images(images)
         if tuple(images.shape[1:3]) != tuple(self.image_shape_):
             raise ValueError(f"images: image size {tuple(images.shape[1:3])} differs from the size "
                              f"{tuple(self.image_shape_)} this {type(self).__name__} was fitted on")
-        return self._checked(self._transform(images))
+        return images
+
+    # -- a first stage several extractors may share ----------------------------------------
+    def stage_key(self) -> str | None:
+        """Identity of a fixed first stage (a trained network) that other fitted extractors
+        may share: extractors with equal keys give equal :meth:`embed` outputs, so a
+        localizer of several maps runs it once per image. None (the default): no such
+        stage, :meth:`embed` returns the images."""
+        return None
+
+    def embed(self, images: np.ndarray) -> np.ndarray:
+        """The first stage of :meth:`transform` on uint8 images (n, H, W, 3): an array (n, ...)
+        with ``transform(images) == head(embed(images))``."""
+        return self._embed(self._checked_images(images))
+
+    def head(self, embedded: np.ndarray) -> np.ndarray:
+        """The rest of :meth:`transform`: features (n, n_features_out_) of :meth:`embed`'s
+        output."""
+        self._check_fitted()
+        return self._checked(self._head(embedded))
 
     def _checked(self, out: np.ndarray) -> np.ndarray:
         out = np.asarray(out, dtype=np.float64)
@@ -179,3 +201,9 @@ class FeatureExtractor(TransformerMixin, BaseEstimator):
 
     def _n_out(self) -> int:
         raise NotImplementedError
+
+    def _embed(self, images: np.ndarray) -> np.ndarray:
+        return images
+
+    def _head(self, embedded: np.ndarray) -> np.ndarray:
+        return self._transform(embedded)

@@ -5,6 +5,7 @@ The network itself is in :mod:`localization.features.efficientnet`."""
 from __future__ import annotations
 
 import hashlib
+import json
 from typing import Any
 
 import numpy as np
@@ -157,7 +158,23 @@ class EfficientNetFeatures(FeatureExtractor):
         return self.pca_.transform(feats)
 
     def _transform(self, images: np.ndarray) -> np.ndarray:
-        feats = self.pooled_features(images)
+        return self._head(self._embed(images))
+
+    def stage_key(self) -> str:
+        """The network's weights and the pooling settings: extractors with the same key share
+        the pooled features; each keeps its own PCA."""
+        self._check_fitted()
+        return json.dumps([self.weights_sha256_, int(self.input_size), self.layer,
+                           list(_check_grid(self.grid))])
+
+    def _embed(self, images: np.ndarray) -> np.ndarray:
+        return self.pooled_features(images)
+
+    def _head(self, embedded: np.ndarray) -> np.ndarray:
+        feats = np.asarray(embedded, dtype=np.float64)
+        if feats.ndim != 2 or feats.shape[1] != self._pooled_dim():
+            raise ValueError(f"embedded must be pooled features (n, {self._pooled_dim()}), "
+                             f"got {feats.shape}")
         return feats if self.pca_ is None else self.pca_.transform(feats)
 
     def _state_arrays(self) -> dict[str, np.ndarray]:

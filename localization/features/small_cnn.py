@@ -28,6 +28,7 @@ for PixelPCA and 6.9 m / 39 deg / 31 % for ImageNet EfficientNet-Lite0.
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 from typing import Any
@@ -245,6 +246,16 @@ def save_small_cnn(model: SmallCNN, path: str | Path) -> None:
                 "loss_history": list(model.loss_history)}, path)
 
 
+def network_digest(model: nn.Module) -> str:
+    """SHA-256 of a network's configuration (if any) and weights: equal digests, equal
+    outputs."""
+    h = hashlib.sha256(json.dumps(getattr(model, "config", {}), sort_keys=True).encode())
+    for name, value in model.state_dict().items():
+        h.update(name.encode())
+        h.update(np.ascontiguousarray(value.detach().cpu().numpy()).tobytes())
+    return h.hexdigest()
+
+
 def load_small_cnn(path: str | Path) -> SmallCNN:
     """Load a model written by :func:`save_small_cnn` (eval mode, strict)."""
     ckpt = torch.load(path, map_location="cpu", weights_only=True)
@@ -326,6 +337,7 @@ class SmallCNNFeatures(FeatureExtractor):
                 progress=self.progress)
         else:
             self.model_ = load_small_cnn(self.weights)
+        self._stage_key = None
         emb = self.embeddings(images)
         self.pca_ = None
         if self.n_components is not None:
@@ -333,7 +345,24 @@ class SmallCNNFeatures(FeatureExtractor):
         return emb if self.pca_ is None else self.pca_.transform(emb)
 
     def _transform(self, images: np.ndarray) -> np.ndarray:
-        emb = self.embeddings(images)
+        return self._head(self._embed(images))
+
+    def stage_key(self) -> str:
+        """A digest of the CNN (its configuration and weights): extractors with the same
+        network share its embeddings; each keeps its own PCA."""
+        self._check_fitted()
+        if getattr(self, "_stage_key", None) is None:
+            self._stage_key = network_digest(self.model_)
+        return self._stage_key
+
+    def _embed(self, images: np.ndarray) -> np.ndarray:
+        return self.embeddings(images)
+
+    def _head(self, embedded: np.ndarray) -> np.ndarray:
+        emb = np.asarray(embedded, dtype=np.float64)
+        if emb.ndim != 2 or emb.shape[1] != self.model_.config["embedding_dim"]:
+            raise ValueError(f"embedded must be CNN embeddings (n, "
+                             f"{self.model_.config['embedding_dim']}), got {emb.shape}")
         return emb if self.pca_ is None else self.pca_.transform(emb)
 
     def _state_arrays(self) -> dict[str, np.ndarray]:
@@ -349,6 +378,7 @@ class SmallCNNFeatures(FeatureExtractor):
               if k.startswith("cnn/")}
         model.load_state_dict(sd, strict=True)
         self.model_ = model.eval()
+        self._stage_key = None
         self.pca_ = pca_from_state(state, whiten=False)
 
     def _n_out(self) -> int:

@@ -79,6 +79,11 @@ def test_each_image_is_measured_by_the_look_it_resembles(exp, test_set):
     assert np.mean(chosen_day == 0) >= 0.85 and np.mean(chosen_night == 1) >= 0.85
     w = exp.transform(night[:1])[0]
     assert exp.local(np.zeros(3), w).index == 1 and exp.local(np.zeros(3)).index == 0
+    both = exp.transform(np.concatenate([day[:5], night[:5]]))
+    once = [exp.experience_of(v) for v in both]  # one image at a time, the last one kept
+    again = [exp.experience_of(v) for v in both[::-1]][::-1]
+    np.testing.assert_array_equal(once, exp.experiences_of(both))
+    np.testing.assert_array_equal(again, once)
 
 
 def test_night_images_read_far_better_than_on_the_daylight_map(exp, train, test_set):
@@ -192,3 +197,28 @@ def test_a_look_learns_its_features_r_only_from_enough_finite_residuals(exp, dri
         exp.fit_noise(env.unwrapped.motion_model, *drive)  # the night look is barely chosen
     np.testing.assert_array_equal(exp.districts_[1].noise_["features"], before)
     env.close()
+
+
+def test_looks_share_one_cnn_run_per_image(train, test_set, monkeypatch):
+    from localization.features.small_cnn import SmallCNNFeatures
+    from localization.features.weights import small_cnn_weights
+
+    day, poses, night = train
+    weights = str(small_cnn_weights("perspective", "conditions"))
+    params = {"features": "small_cnn", "noise_folds": 0,
+              "features_params": {"n_components": 16, "weights": weights, "progress": False}}
+    with warnings.catch_warnings():
+        ignore_gse_warnings()
+        loc = ExperienceLocalizer(localizer_params=params).fit(
+            np.concatenate([day, night]), np.concatenate([poses, poses]),
+            experiences=["day"] * len(poses) + ["night"] * len(poses))
+    one, two = loc.districts_
+    assert one.stage_key() == two.stage_key()  # one network, each look its own PCA
+    images = test_set[2][:20]
+    expected = np.concatenate([one.transform(images), two.transform(images)], axis=1)
+    calls = []
+    embeddings = SmallCNNFeatures.embeddings
+    monkeypatch.setattr(SmallCNNFeatures, "embeddings",
+                        lambda self, x: calls.append(len(x)) or embeddings(self, x))
+    np.testing.assert_array_equal(loc.transform(images), expected)
+    assert calls == [len(images)]

@@ -271,3 +271,28 @@ def test_pca_projection_is_scikit_learns_transform_bit_for_bit(whiten):
     pca = fit_pca(x, 40, whiten, 0)
     q = rng.random((7, 40), dtype=np.float32)
     np.testing.assert_array_equal(pca_project(pca, q), pca.transform(q))
+
+
+def test_shared_stage_splits_transform_and_names_the_network(images, cnn_weights, tmp_path):
+    a, b = images[:24], images[24:]
+    for ext in extractors(cnn_weights):
+        ext.fit(a)
+        np.testing.assert_array_equal(ext.head(ext.embed(b)), ext.transform(b))
+    pixel, _, enet_raw, enet_pca, cnn = extractors(cnn_weights)
+    assert pixel.fit(a).stage_key() is None
+    other = SmallCNNFeatures(8, weights=cnn_weights, progress=False).fit(b)
+    assert cnn.fit(a).stage_key() == other.stage_key()  # one network, two PCAs
+    assert enet_raw.fit(a).stage_key() == enet_pca.fit(b).stage_key()
+    assert EfficientNetFeatures(grid=(1, 2), progress=False).fit(a).stage_key() != \
+        enet_raw.stage_key()
+    retrained = tmp_path / "retrained.pt"
+    save_small_cnn(train_small_cnn(images, epochs=1, seed=1, batch_size=16, embedding_dim=32,
+                                   width=16, progress=False), retrained)
+    assert SmallCNNFeatures(8, weights=str(retrained), progress=False).fit(a).stage_key() != \
+        cnn.stage_key()
+    loaded = features_from_state(cnn.get_state())
+    assert loaded.stage_key() == cnn.stage_key()
+    with pytest.raises(ValueError, match="embedded must be CNN embeddings"):
+        cnn.head(np.zeros((2, 5)))
+    with pytest.raises(ValueError, match="embedded must be pooled features"):
+        enet_raw.head(np.zeros((2, 5)))
