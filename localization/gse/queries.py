@@ -210,3 +210,11 @@ class GSEQueryMixin:
         R, JR = self._R_star(Theta, True)
         _, Jg = self._recover(R, slice(0, len(self.w_mean_)), jacobian=True)
         return self.w_scale_ * (Jg @ JR)
+
+    def features_and_jacobian(self, Theta: Array) -> tuple[Array, Array]:
+        """Phi*(theta) (n, m) and dPhi*/dtheta (n, m, d) from one evaluation of R*
+        (:meth:`predict_features` and :meth:`features_jacobian` together)."""
+        R, JR = self._R_star(Theta, True)
+        gu, Jg = self._recover(R, slice(0, len(self.w_mean_)), jacobian=True)
+        assert Jg is not None and JR is not None
+        return gu * self.w_scale_ + self.w_mean_, self.w_scale_ * (Jg @ JR)

@@ -27,6 +27,30 @@ def test_predict_near_the_truth(localizer, lane_data):
     assert np.median(err) < 0.6 and np.median(yaw) < 0.05
 
 
+def test_refined_predict_explains_the_features_better(localizer, lane_data):
+    import copy
+
+    images, _ = lane_data
+    W = localizer.transform(images[:60])
+    psi = localizer.predict(images[:60])
+    np.testing.assert_array_equal(localizer.predict(images[:60], refine=0), psi)
+    refined = localizer.predict(images[:60], refine=3)
+    assert np.array_equal(np.isfinite(refined), np.isfinite(psi))
+    L, reg = localizer.feature_whitener(), localizer.regressor_
+
+    def cost(poses):
+        return np.sum(((W - reg.predict_features(localizer.to_model(poses))) @ L.T) ** 2, axis=1)
+
+    ok = np.all(np.isfinite(psi), axis=1)
+    assert np.all(cost(refined[ok]) <= cost(psi[ok]))
+    with pytest.raises(ValueError, match="refine"):
+        localizer.predict(images[:2], refine=-1)
+    quiet = copy.deepcopy(localizer)
+    quiet.noise_ = {}
+    with pytest.raises(NotFittedError, match="noise"):
+        quiet.predict(images[:2], refine=3)
+
+
 def test_heading_cut_is_where_no_lane_goes(localizer):
     theta = localizer._from_model(localizer.regressor_.theta_)
     gap = np.abs(wrap_angle(theta[:, 2] - localizer.yaw_cut_))

@@ -86,7 +86,7 @@ from localization.workflows.tracking import (
 __all__ = ["SMALL_CNN_NEIGHBORS", "CoverageBenchConfig", "localizer_params", "run_coverage_bench",
            "single_image_errors"]
 
-METHODS = ("GSE", "KNR", "retrieval")
+METHODS = ("GSE", "GSE refined", "KNR", "retrieval")
 #: GSE neighbours on the SmallCNN features (tuning cities 12, 13: docs/benchmarks.md §6)
 SMALL_CNN_NEIGHBORS = 15
 
@@ -111,6 +111,9 @@ class CoverageBenchConfig:
         "help": "PCA components of the features"})
     n_drive: int = field(default=1500, metadata={"help": "steps of each noise-calibration drive"})
     n_test: int = field(default=500, metadata={"help": "single test images per city and camera"})
+    refine: int = field(default=3, metadata={
+        "help": "Gauss-Newton steps of the 'GSE refined' row (predict(refine=...); 3 chosen "
+                "on tuning cities 12-13)"})
     n_drives: int = field(default=3, metadata={"help": "off-lane drives per city and camera"})
     drive_steps: int = field(default=500, metadata={"help": "steps of each off-lane drive"})
     lane_baseline: bool = field(default=False, metadata={
@@ -287,6 +290,7 @@ def run_coverage_bench(args: CoverageBenchConfig) -> dict[str, Any]:
                                                 progress=False)
                 W = loc.transform(images)
                 preds = {"GSE": loc.predict(images),
+                         "GSE refined": loc.predict(images, refine=args.refine),
                          **{k: est.predict(W) for k, est in baselines.items()}}
                 for m in METHODS:
                     single[camera][m].append(single_image_errors(preds[m], poses))

@@ -73,7 +73,7 @@ def test_quick_run_end_to_end(tmp_path: Path):
     saved = json.loads((tmp_path / "bench_coverage.json").read_text())
     table = (tmp_path / "bench_coverage.md").read_text()
     s = saved["summary"]["perspective"]
-    for method in ("GSE", "KNR", "retrieval"):
+    for method in ("GSE", "GSE refined", "KNR", "retrieval"):
         assert s["single"][method]["n_images"] == 40
         within = s["single"][method]["within"]
         assert within == sorted(within) and all(0.0 <= v <= 1.0 for v in within)

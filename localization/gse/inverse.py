@@ -1,0 +1,131 @@
+"""The inverse of Phi*: an image's pose by Gauss-Newton on its whitened feature residual,
+started at psi*(w) (docs/method.md §8.4).
+
+psi*(w) = g_v(r*(w)) reads the pose off the embedding: a kernel average over the images
+whose features lie nearest, which blurs where the samples are sparse (a city's street
+surface at every heading). Phi* models the features of every pose, with its exact Jacobian,
+so the pose that best explains the image under the features' noise R,
+
+    theta_hat = argmin_theta  e(theta)^T e(theta),   e(theta) = L (w - Phi*(theta)),
+    L = chol(R)^-1 (the whitener: L R L^T = I),
+
+is a few damped Gauss-Newton steps away from psi*(w): with J = L dPhi*/dtheta,
+
+    step = pinv(J) e,   theta <- theta + a step,   a = 1, 1/2, ... until the cost falls
+
+(at most ``max_halvings`` halvings; a row without descent keeps its pose; periodic columns
+are wrapped). r*(w) and R* are no help here: psi*(w) already solves R*(theta) = r*(w) to
+numerical precision.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from localization._validation import check_array, check_int
+from localization.geometry import wrap_angle
+from localization.gse.graph import Array
+
+__all__ = ["feature_whitener", "refine_poses"]
+
+
+def feature_whitener(cov: ArrayLike) -> Array:
+    """The whitener L (m, m) of a features' noise covariance R (m, m): ``L R L^T = I``
+    (a ridge of 1e-9 of R's mean variance keeps a rank-deficient R invertible).
+
+    Raises
+    ------
+    ValueError
+        If ``cov`` is not a finite symmetric positive semi-definite (m, m) matrix.
+    """
+    R = check_array(cov, "cov")
+    if R.ndim != 2 or R.shape[0] != R.shape[1] or not np.allclose(R, R.T, atol=1e-12 * np.abs(R).max()):
+        raise ValueError(f"cov must be a symmetric (m, m) covariance, got shape {R.shape}")
+    R = 0.5 * (R + R.T) + 1e-9 * max(float(np.trace(R)) / len(R), 1e-300) * np.eye(len(R))
+    try:
+        C = np.linalg.cholesky(R)
+    except np.linalg.LinAlgError as err:
+        raise ValueError("cov must be positive semi-definite (its Cholesky factor failed)") from err
+    return np.linalg.solve(C, np.eye(len(R)))
+
+
+def refine_poses(reg: Any, W: ArrayLike, theta0: ArrayLike, whitener: ArrayLike,
+                 n_iter: int = 3, max_halvings: int = 5) -> Array:
+    """Damped Gauss-Newton on ``|L (w - Phi*(theta))|^2`` from ``theta0`` (see the module
+    docstring), every row at once.
+
+    Parameters
+    ----------
+    reg : GSERegressor
+        Fitted; its ``features_and_jacobian`` gives Phi* and dPhi*/dtheta.
+    W : ndarray (n, m)
+        Features.
+    theta0 : ndarray (n, d)
+        Start poses in the regressor's coordinates (psi*(W)); NaN rows stay NaN.
+    whitener : ndarray (m, m)
+        L of :func:`feature_whitener`.
+    n_iter : int
+        Gauss-Newton steps (3: on tuning cities 12-13 the gain came in 2-3 steps).
+    max_halvings : int
+        Step halvings tried per step before a row stops.
+
+    Returns
+    -------
+    theta : ndarray (n, d)
+    """
+    W = check_array(W, "W", finite=False)
+    theta = check_array(theta0, "theta0", finite=False).copy()
+    L = check_array(whitener, "whitener")
+    if W.ndim != 2 or theta.ndim != 2 or len(W) != len(theta) or L.shape != (W.shape[1],) * 2:
+        raise ValueError(f"W (n, m), theta0 (n, d) and whitener (m, m) disagree: W {W.shape}, "
+                         f"theta0 {theta.shape}, whitener {L.shape}")
+    n_iter = check_int(n_iter, "n_iter", low=0)
+    max_halvings = check_int(max_halvings, "max_halvings", low=0)
+    live = np.flatnonzero(np.all(np.isfinite(theta), axis=1) & np.all(np.isfinite(W), axis=1))
+    if not len(live) or not n_iter:
+        return theta
+    e, J, cost = _whitened(reg, W[live], theta[live], L)
+    for _ in range(n_iter):
+        keep = np.isfinite(cost)
+        live, e, J, cost = live[keep], e[keep], J[keep], cost[keep]
+        if not len(live):
+            break
+        step = (np.linalg.pinv(J) @ e[:, :, None])[..., 0]
+        moved = _line_search(reg, W[live], theta[live], step, L, cost, max_halvings)
+        theta[live], e, J, cost = moved
+    return theta
+
+
+def _whitened(reg: Any, W: Array, theta: Array, L: Array) -> tuple[Array, Array, Array]:
+    """Whitened residuals e (n, m), Jacobians J = L dPhi*/dtheta (n, m, d) and costs (n,)
+    (inf where Phi* is undefined)."""
+    phi, dphi = reg.features_and_jacobian(theta)
+    e = (W - phi) @ L.T
+    cost = np.sum(e ** 2, axis=1)
+    return e, L @ dphi, np.where(np.isfinite(cost), cost, np.inf)
+
+
+def _line_search(reg: Any, W: Array, theta: Array, step: Array, L: Array, cost: Array,
+                 max_halvings: int) -> tuple[Array, Array, Array, Array]:
+    """Each row's step, halved until its cost falls; rows that never descend keep their pose
+    and get cost inf (they stop)."""
+    periodic = list(getattr(reg, "periodic", ()))
+    theta = theta.copy()
+    out_e = np.zeros((len(theta), W.shape[1]))
+    out_J = np.zeros((len(theta), W.shape[1], theta.shape[1]))
+    new_cost = np.full(len(theta), np.inf)
+    pending, a = np.arange(len(theta)), 1.0
+    for _ in range(max_halvings + 1):
+        trial = theta[pending] + a * step[pending]
+        trial[:, periodic] = wrap_angle(trial[:, periodic])
+        e, J, c = _whitened(reg, W[pending], trial, L)
+        down = c < cost[pending]
+        rows = pending[down]
+        theta[rows], out_e[rows], out_J[rows], new_cost[rows] = trial[down], e[down], J[down], c[down]
+        pending, a = pending[~down], 0.5 * a
+        if not len(pending):
+            break
+    return theta, out_e, out_J, new_cost
