@@ -41,10 +41,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from sklearn.exceptions import NotFittedError
 
 from localization._localizer_belief import BeliefInterfaceMixin
+from localization._localizer_features import ImageFeaturesMixin
 from localization._localizer_io import load_localizer, save_localizer
 from localization._localizer_map import (  # noqa: F401  (city_info, OtherCityError: public here)
     MapMixin,
@@ -57,7 +58,6 @@ from localization._localizer_noise import MEASUREMENTS, NoiseModelMixin, check_d
 from localization._validation import (
     check_array,
     check_choice,
-    check_images,
     check_int,
     check_real,
     check_seed,
@@ -91,7 +91,7 @@ def sparsest_heading(yaw: ArrayLike, bins: int = _YAW_BINS) -> float:
     return float(0.5 * (edges[i] + edges[i + 1]))
 
 
-class AppearanceLocalizer(NoiseModelMixin, BeliefInterfaceMixin, MapMixin):
+class AppearanceLocalizer(ImageFeaturesMixin, NoiseModelMixin, BeliefInterfaceMixin, MapMixin):
     """Localize a camera from its images: image rows + features + GSE regression + noise.
 
     Parameters
@@ -279,16 +279,6 @@ class AppearanceLocalizer(NoiseModelMixin, BeliefInterfaceMixin, MapMixin):
         check_seed(self.random_state, "random_state")
         check_real(self.max_dropped, "max_dropped", low=0.0, high=1.0, high_open=True)
 
-    def _row_slice(self, height: int) -> slice:
-        a, b = (float(r) for r in self.rows)
-        if not 0.0 <= a < b <= 1.0:
-            raise ValueError(f"rows must be fractions 0 <= start < stop <= 1, got {self.rows}")
-        start = round(a * height)
-        return slice(start, max(round(b * height), start + 1))
-
-    def _crop(self, images: NDArray[np.uint8]) -> NDArray[np.uint8]:
-        return np.ascontiguousarray(images[:, self._row_slice(images.shape[1])])
-
     def to_model(self, poses: ArrayLike) -> Array:
         """World poses (n, 3) -> the regressor's poses (n, 3): the heading rotated so that
         GSE's cut of the circle (``yaw_cut_``) lies at +-pi (docs/method.md §10)."""
@@ -317,44 +307,6 @@ class AppearanceLocalizer(NoiseModelMixin, BeliefInterfaceMixin, MapMixin):
         if noise and set(self.noise_) != set(MEASUREMENTS):
             raise NotFittedError("no measurement noise: fit with noise_folds >= 2 or call "
                                  "fit_noise()")
-
-    def check_images(self, images: ArrayLike) -> NDArray[np.uint8]:
-        """Validate an image (H, W, 3) or batch (n, H, W, 3) against the fitted image size."""
-        self._check_fitted()
-        images = check_images(images, "images", single=np.ndim(images) == 3)
-        if images.ndim == 3:
-            images = images[None]
-        if images.ndim != 4 or images.shape[-1] != 3:
-            raise ValueError(f"images must have shape (n, H, W, 3), got {images.shape}")
-        if tuple(images.shape[1:3]) != tuple(self.image_size_):
-            raise ValueError(f"the localizer was fitted on {tuple(self.image_size_)} images, "
-                             f"got {tuple(images.shape[1:3])}")
-        if images.dtype != np.uint8:
-            raise ValueError(f"images must be uint8, got {images.dtype}")
-        return images
-
-    def transform(self, images: ArrayLike) -> Array:
-        """Features w = omega(X) of images, shape (n, m)."""
-        crop = self._crop(self.check_images(images))
-        return self.features_.transform(crop)
-
-    def stage_key(self) -> tuple[Any, ...] | None:
-        """Identity of the feature extractor's first stage on this localizer's image rows
-        (:meth:`FeatureExtractor.stage_key`): localizers with equal keys give equal
-        :meth:`embed` outputs. None: the extractor has no stage to share."""
-        self._check_fitted()
-        key = self.features_.stage_key()
-        if key is None:
-            return None
-        return key, tuple(float(r) for r in self.rows), tuple(self.image_size_)
-
-    def embed(self, images: ArrayLike) -> Array:
-        """The first stage of :meth:`transform`: ``transform(X) == head(embed(X))``."""
-        return self.features_.embed(self._crop(self.check_images(images)))
-
-    def head(self, embedded: ArrayLike) -> Array:
-        """The rest of :meth:`transform`: features w (n, m) of :meth:`embed`'s output."""
-        return self.features_.head(np.asarray(embedded))
 
     def predict(self, images: ArrayLike, refine: int = 0) -> Array:
         """psi*(X): poses (n, 3) of images (n, H, W, 3); NaN rows for images whose

@@ -24,7 +24,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("localization.localizer", "localization._localizer_io", "localization._localizer_noise",
      "localization._localizer_map", "localization._localizer_belief",
      "localization.districts", "localization._districts_noise", "localization._districts_io",
-     "localization._district_maps",
+     "localization._district_maps", "localization._localizer_features",
      "localization.experiences",
      "localization.loading",
      "localization.wrappers", "localization.wrapper_render", "localization.belief_render"),
