@@ -53,7 +53,8 @@ FILTERS = ("ekf", "particles")
 LOCALIZE = ("image", "global")
 #: filter_options each filter takes (the rest of its settings are BeliefWrapper's arguments)
 FILTER_OPTIONS = {
-    "ekf": ("detect_divergence", "alpha", "inflate_factor", "noise", "free_space"),
+    "ekf": ("detect_divergence", "alpha", "inflate_factor", "noise", "free_space",
+            "contact_motion"),
     "particles": ("n_particles", "resample_threshold", "resample", "alpha", "alpha_slow",
                   "alpha_fast", "injection_ratio", "max_injection", "ambiguous_injection",
                   "n_neighbors", "proposal_noise", "global_proposal_fraction", "sample_free",

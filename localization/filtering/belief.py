@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from localization._validation import check_choice, check_int, check_real
+from localization.filtering._belief_recovery import RecoveryMixin
 from localization.filtering.divergence import monitor_for
 from localization.filtering.ekf import (
     OutOfDomainError,
@@ -45,7 +46,9 @@ from localization.filtering.ekf import (
 from localization.filtering.localizer_protocol import Localizer, check_localizer
 from localization.filtering.map_contact import (
     CONTACT_LOST_STEPS,
+    CONTACT_MOTIONS,
     FreeSpace,
+    blocked_motion,
     check_free_space,
     contact_contradicts,
 )
@@ -65,7 +68,7 @@ MAX_HEADING_STD = 0.5  # rad: heading inflation stops there
 LOST_HEADING_STD = 0.6
 
 
-class BeliefFilter:
+class BeliefFilter(RecoveryMixin):
     """EKF pose belief fed with image features.
 
     Parameters
@@ -96,7 +99,12 @@ class BeliefFilter:
         fitted with ``noise_folds >= 2``).
     free_space : callable, optional
         The map, ``free_space(points (n, 2), margin) -> (n,) bool`` (``city.free_mask``): a
-        contact where it has room around the belief makes it "lost". None: contacts ignored.
+        contact where it has room around the belief makes it "lost". None: no contact makes
+        it lost.
+    contact_motion : {"blocked", "commanded"}
+        How a contact step is predicted: "blocked" (no translation, the commanded step as
+        one standard deviation: :func:`~localization.filtering.map_contact.blocked_motion`),
+        or with the commanded control as any other step.
 
     Attributes
     ----------
@@ -115,9 +123,11 @@ class BeliefFilter:
                  alpha: ArrayLike | None = None, inflate_after: int | None = 3,
                  inflate_factor: float = 2.0,
                  detect_divergence: bool | dict[str, Any] = False,
-                 noise: str = "global", free_space: FreeSpace | None = None) -> None:
+                 noise: str = "global", free_space: FreeSpace | None = None,
+                 contact_motion: str = "blocked") -> None:
         check_localizer(localizer)
         check_choice(noise, "noise", NOISE_MODELS)
+        self.contact_motion = check_choice(contact_motion, "contact_motion", CONTACT_MOTIONS)
         motion_model = check_motion_model(motion_model)
         gate_probability = check_gate_probability(gate_probability)
         if relocalize_after is not None:
@@ -258,9 +268,10 @@ class BeliefFilter:
     def step(self, u: ArrayLike, w: ArrayLike, contact: bool = False) -> tuple[float, str]:
         """Predict with the commanded control ``u`` (2,), update with the new features ``w``.
 
-        ``contact``: the robot touched something this step (``info["collision"]``); with
-        ``free_space``, a contact where the map has room around the belief makes it "lost"
-        for ``CONTACT_LOST_STEPS`` steps (:mod:`~localization.filtering.map_contact`).
+        ``contact``: the robot touched something this step (``info["collision"]``): the
+        step is predicted as ``contact_motion`` says; with ``free_space``, a contact where
+        the map has room around the belief makes it "lost" for ``CONTACT_LOST_STEPS`` steps
+        (:mod:`~localization.filtering.map_contact`).
 
         Returns
         -------
@@ -271,7 +282,8 @@ class BeliefFilter:
         """
         self._check()
         assert self.ekf is not None
-        self.ekf.predict(self.gain * np.asarray(u, dtype=np.float64))
+        self._motion = self._step_motion(u, contact)
+        self.ekf.predict(*self._motion)
         w = np.asarray(w, dtype=np.float64)
         nis, status = self._update(w)
         self.gated = self.gated + 1 if status == "gated" else 0
@@ -291,9 +303,9 @@ class BeliefFilter:
         if status == "relocalized":
             self.belief_status = "relocalizing"
         elif self._trial is not None:
-            status = self._on_trial(u, w, status)
+            status = self._on_trial(w, status)
         elif self.monitor is not None:
-            status = self._watch(u, w, nis, status)
+            status = self._watch(w, nis, status)
         self._bumped = max(self._bumped - 1, 0)
         if contact and self.free_space is not None and contact_contradicts(
                 self.free_space, self.ekf.x, self.ekf.P):
@@ -301,87 +313,14 @@ class BeliefFilter:
         self._update_status(status)
         return nis, status
 
-    def _relocalize(self, w: Array, status: str) -> str:
-        """Restart at psi*(w) after ``relocalize_after`` misses, on trial against the belief it
-        replaces (:meth:`_on_trial`): a belief coasting through views off the maps may be
-        right, and one image's psi* may be a look-alike place. Nothing to come back to for a
-        belief that was never placed (a start off the maps) or is itself still on trial."""
-        prior, misses, keep = self.ekf, self.misses, self._placed and self._trial is None
-        if not self._from_image(w):
-            return status
-        if keep:
-            self._put_on_trial(prior, misses)
-        return "relocalized"
-
-    def _put_on_trial(self, replaced: PoseEKF | None, misses: int) -> None:
-        """The restarted EKF is on trial against ``replaced`` (None: nothing to come back to),
-        which had ``misses`` steps without an accepted measurement (:meth:`_on_trial`)."""
-        self._trial = RestartTrial(replaced, misses)
-
-    def _watch(self, u: ArrayLike, w: Array, nis: float, status: str) -> str:
-        """Feed the divergence monitor; restart from the proposals when it says so."""
-        assert self.ekf is not None and self.monitor is not None
-        self.monitor.move_proposals(self.motion_model, self.gain * np.asarray(u, float))
-        psi = np.asarray(self.localizer.measure(w, "pose"), dtype=np.float64)
-        dim_z = self.last_update.dim_z if self.last_update is not None else 3
-        verdict = self.monitor.observe(nis, dim_z, psi, self.ekf.x, self.ekf.P,
-                                       status != "accepted", forced=self._forced)
-        if verdict.restart is not None and self._restart_explains(
-                verdict.restart, verdict.restart_cov, w):
-            self.belief_status = "relocalizing"
-            return "relocalized"
-        self._lost_now, self._doubtful_now = verdict.lost, verdict.doubtful
-        return status
-
-    def _restart_explains(self, x0: Array, P0: Array, w: Array) -> bool:
-        """Restart at ``x0``, ``P0`` and update with the current image, if that image's
-        measurement passes the gate there (a cluster of aliased proposals whose place the
-        image does not fit is refused; the belief is left alone)."""
-        prior, kept, forced = self.ekf, (self.misses, self.gated), self._forced
-        self._start(x0, P0)
-        z, model = self._measurement(self.ekf.x, w)
-        try:
-            ok = bool(np.all(np.isfinite(z))) and self.ekf.update(z, model).accepted
-        except OutOfDomainError:
-            ok = False
-        if not ok and not forced:
-            self.ekf, (self.misses, self.gated) = prior, kept
-        elif ok and not forced and prior is not None:
-            self._put_on_trial(prior, kept[0])
-        return ok or forced  # an unknown start takes the agreed place either way
-
-    def _on_trial(self, u: ArrayLike, w: Array, status: str) -> str:
-        """One step of a (re)start on trial (:mod:`~localization.filtering.restart_trial`):
-        the EKF it replaced runs on beside it; once the trial fails, that EKF comes back
-        ("reverted"), or with nothing to come back to (a start from one image) the belief
-        starts again at the current image's psi* ("relocalized"): on tuning city 13 a first
-        image's psi* 11 m off stood for 78 steps until the 50-step restart."""
-        trial = self._trial
-        assert trial is not None and self.ekf is not None
-        if trial.replaced is not None:
-            trial.misses = 0 if self._step_replaced(trial.replaced, u, w) else trial.misses + 1
-        trial.record(status)
-        if not (trial.confirmed or trial.failed):
-            return status
-        self._trial = None
-        if trial.confirmed:
-            return status
-        if trial.replaced is None:
-            return "relocalized" if self._from_image(w) else status
-        self.ekf, self.misses, self.gated, self._bumped = trial.replaced, trial.misses, 0, 0
-        self.belief_status = "tracking"
-        if self.monitor is not None:
-            self.monitor.clear()
-        return "reverted"
-
-    def _step_replaced(self, old: PoseEKF, u: ArrayLike, w: Array) -> bool:
-        """Predict and update the EKF a restart replaced; whether it accepted the image."""
-        old.predict(self.gain * np.asarray(u, dtype=np.float64))
-        z, model = self._measurement(old.x, w)
-        try:
-            return bool(np.all(np.isfinite(z))) and old.update(z, model).accepted
-        except OutOfDomainError:
-            return False
+    def _step_motion(self, u: ArrayLike, contact: bool) -> tuple[Array, Array | None]:
+        """The control ``k U`` of this step and its extra process noise (a contact's,
+        ``contact_motion="blocked"``; None otherwise)."""
+        u_k = self.gain * np.asarray(u, dtype=np.float64)
+        if contact and self.contact_motion == "blocked":
+            assert self.ekf is not None
+            return blocked_motion(self.motion_model, self.ekf.x, u_k)
+        return u_k, None
 
     def _update_status(self, status: str) -> None:
         """"relocalizing" until ``CONFIRM_STEPS`` accepted measurements; otherwise "lost"

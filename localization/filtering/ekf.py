@@ -269,13 +269,16 @@ class PoseEKF(ExtendedKalmanFilter):
         """State prediction ``x = F(x, u)`` through the motion model (called by filterpy)."""
         self.x = self.motion_model.predict(self.x, u)
 
-    def predict(self, u: ArrayLike) -> None:  # type: ignore[override]
-        """Prior: ``F = dF/dx (x, u)``, ``x = F(x, u)``, ``P = F P F^T + Q``.
+    def predict(self, u: ArrayLike, Q_extra: ArrayLike | None = None  # type: ignore[override]
+                ) -> None:
+        """Prior: ``F = dF/dx (x, u)``, ``x = F(x, u)``, ``P = F P F^T + Q (+ Q_extra)``.
 
         Parameters
         ----------
         u : array_like (2,)
             Control ``[v, w]`` held over one step.
+        Q_extra : array_like (3, 3), optional
+            More process noise for this step only (e.g. a contact's, ``map_contact.blocked_motion``).
         """
         u = _finite_vector(u, "u", 2)
         self.F = self.motion_model.jacobian_pose(self.x, u)
@@ -283,6 +286,8 @@ class PoseEKF(ExtendedKalmanFilter):
             self.Q = _covariance(self._Q_fun(self.x, u), "Q(x, u)", 3, definite=False)
         super().predict(u)
         self.x[2] = wrap_angle(self.x[2])
+        if Q_extra is not None:
+            self.P = self.P + _covariance(Q_extra, "Q_extra", 3, definite=False)
         self.P = 0.5 * (self.P + self.P.T)
         self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
 

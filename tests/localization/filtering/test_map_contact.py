@@ -8,6 +8,7 @@ import pytest
 from localization.filtering.map_contact import (
     CONTACT_CLEARANCE,
     CONTACT_LOST_STEPS,
+    blocked_motion,
     check_free_space,
     contact_contradicts,
 )
@@ -50,14 +51,14 @@ def test_bad_maps_are_named() -> None:
         contact_contradicts(lambda p, m: np.ones((2, 2), bool), X, np.eye(3))
 
 
-def _tracking(localizer, drive, free_space, steps: int = 60):
+def _tracking(localizer, drive, free_space, steps: int = 60, **options):
     from localization.filtering.belief import BeliefFilter
     from tests.localization.conftest import make_env
 
     images, poses, controls = drive
     W = localizer.transform(images)
     env = make_env()
-    f = BeliefFilter(localizer, env.unwrapped.motion_model, free_space=free_space)
+    f = BeliefFilter(localizer, env.unwrapped.motion_model, free_space=free_space, **options)
     env.close()
     f.reset(W[0], poses[0], np.diag([0.01, 0.01, 0.001]))
     for t in range(1, steps):
@@ -81,11 +82,39 @@ def test_a_contradicting_contact_makes_the_belief_lost_for_a_while(localizer, dr
 @pytest.mark.parametrize("free_space", [Map(False), None], ids=["at a wall", "no map"])
 def test_a_contact_the_map_explains_or_without_a_map_changes_nothing(localizer, drive,
                                                                       free_space):
-    f, W, controls = _tracking(localizer, drive, free_space)
+    """With the commanded motion; the blocked one is below."""
+    f, W, controls = _tracking(localizer, drive, free_space, contact_motion="commanded")
     x = f.x
     f.step(controls[59], W[60], contact=True)
-    g, _, _ = _tracking(localizer, drive, free_space, steps=61)
+    g, _, _ = _tracking(localizer, drive, free_space, steps=61, contact_motion="commanded")
     assert f.belief_status == "tracking" and np.array_equal(f.x, g.x) and not np.array_equal(x, f.x)
+    assert np.array_equal(f.P, g.P)
+
+
+def test_blocked_motion_keeps_the_turn_and_makes_the_step_its_uncertainty() -> None:
+    from envs.motion_model import UnicycleModel
+
+    model = UnicycleModel(0.1)
+    u_blocked, Q = blocked_motion(model, X, np.array([0.8, 0.5]))
+    np.testing.assert_array_equal(u_blocked, [0.0, 0.5])
+    d = np.hypot(*(model.predict(X, [0.8, 0.5])[:2] - X[:2]))  # the turn does not translate
+    np.testing.assert_allclose(Q, np.diag([d * d, d * d, 0.05 ** 2]))
+    assert d == pytest.approx(0.08, rel=0.01)
+
+
+def test_a_blocked_contact_step_predicts_no_translation(localizer, drive):
+    """The default: a contact step is predicted as blocked, whatever the map says."""
+    import copy
+
+    f, W, controls = _tracking(localizer, drive, Map(False))
+    g = copy.deepcopy(f)
+    f.step(controls[59], W[60], contact=True)
+    g.ekf.predict(*blocked_motion(g.motion_model, g.x, g.gain * controls[59]))
+    np.testing.assert_allclose(f.ekf.x_prior, g.ekf.x_prior)
+    np.testing.assert_allclose(f.ekf.P_prior, g.ekf.P_prior)
+    assert np.hypot(*(f.ekf.x_prior[:2] - g.x[:2])) < 1e-9
+    with pytest.raises(ValueError, match="contact_motion"):
+        _tracking(localizer, drive, None, steps=2, contact_motion="slide")
 
 
 def test_the_wrapper_feels_contacts_against_the_city_by_default(localizer) -> None:

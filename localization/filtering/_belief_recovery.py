@@ -1,0 +1,128 @@
+"""How :class:`~localization.filtering.belief.BeliefFilter` recovers (a mixin): the restart
+at psi* of one image after ``relocalize_after`` misses, every restart on trial against the
+belief it replaced (:mod:`~localization.filtering.restart_trial`), and the divergence
+monitor's restarts (docs/method.md §13, §13.1).
+
+The host class provides ``ekf``, ``misses``, ``gated``, ``belief_status``, ``monitor``,
+``localizer``, ``motion_model``, ``last_update``, the step's motion ``_motion`` (its control
+and extra process noise), ``_trial``, ``_placed``, ``_forced``, ``_bumped``,
+``_lost_now`` / ``_doubtful_now``, ``_start``, ``_from_image`` and ``_measurement``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from localization.filtering.ekf import OutOfDomainError, PoseEKF
+from localization.filtering.restart_trial import RestartTrial
+from localization.geometry import Array
+
+__all__ = ["RecoveryMixin"]
+
+
+class RecoveryMixin:
+    """Restarts, their trials and the divergence watch of the belief filter."""
+
+    ekf: PoseEKF | None
+    misses: int
+    gated: int
+    belief_status: str
+    monitor: Any
+    localizer: Any
+    motion_model: Any
+    last_update: Any
+    _motion: tuple[Array, Array | None]
+    _trial: RestartTrial | None
+    _placed: bool
+    _forced: bool
+    _bumped: int
+    _lost_now: bool
+    _doubtful_now: bool
+    _start: Any
+    _from_image: Any
+    _measurement: Any
+
+    def _relocalize(self, w: Array, status: str) -> str:
+        """Restart at psi*(w) after ``relocalize_after`` misses, on trial against the belief it
+        replaces (:meth:`_on_trial`): a belief coasting through views off the maps may be
+        right, and one image's psi* may be a look-alike place. Nothing to come back to for a
+        belief that was never placed (a start off the maps) or is itself still on trial."""
+        prior, misses, keep = self.ekf, self.misses, self._placed and self._trial is None
+        if not self._from_image(w):
+            return status
+        if keep:
+            self._put_on_trial(prior, misses)
+        return "relocalized"
+
+    def _put_on_trial(self, replaced: PoseEKF | None, misses: int) -> None:
+        """The restarted EKF is on trial against ``replaced`` (None: nothing to come back to),
+        which had ``misses`` steps without an accepted measurement (:meth:`_on_trial`)."""
+        self._trial = RestartTrial(replaced, misses)
+
+    def _watch(self, w: Array, nis: float, status: str) -> str:
+        """Feed the divergence monitor; restart from the proposals when it says so."""
+        assert self.ekf is not None and self.monitor is not None
+        self.monitor.move_proposals(self.motion_model, self._motion[0])
+        psi = np.asarray(self.localizer.measure(w, "pose"), dtype=np.float64)
+        dim_z = self.last_update.dim_z if self.last_update is not None else 3
+        verdict = self.monitor.observe(nis, dim_z, psi, self.ekf.x, self.ekf.P,
+                                       status != "accepted", forced=self._forced)
+        if verdict.restart is not None and self._restart_explains(
+                verdict.restart, verdict.restart_cov, w):
+            self.belief_status = "relocalizing"
+            return "relocalized"
+        self._lost_now, self._doubtful_now = verdict.lost, verdict.doubtful
+        return status
+
+    def _restart_explains(self, x0: Array, P0: Array, w: Array) -> bool:
+        """Restart at ``x0``, ``P0`` and update with the current image, if that image's
+        measurement passes the gate there (a cluster of aliased proposals whose place the
+        image does not fit is refused; the belief is left alone)."""
+        prior, kept, forced = self.ekf, (self.misses, self.gated), self._forced
+        self._start(x0, P0)
+        z, model = self._measurement(self.ekf.x, w)
+        try:
+            ok = bool(np.all(np.isfinite(z))) and self.ekf.update(z, model).accepted
+        except OutOfDomainError:
+            ok = False
+        if not ok and not forced:
+            self.ekf, (self.misses, self.gated) = prior, kept
+        elif ok and not forced and prior is not None:
+            self._put_on_trial(prior, kept[0])
+        return ok or forced  # an unknown start takes the agreed place either way
+
+    def _on_trial(self, w: Array, status: str) -> str:
+        """One step of a (re)start on trial (:mod:`~localization.filtering.restart_trial`):
+        the EKF it replaced runs on beside it; once the trial fails, that EKF comes back
+        ("reverted"), or with nothing to come back to (a start from one image) the belief
+        starts again at the current image's psi* ("relocalized"): on tuning city 13 a first
+        image's psi* 11 m off stood for 78 steps until the 50-step restart."""
+        trial = self._trial
+        assert trial is not None and self.ekf is not None
+        if trial.replaced is not None:
+            trial.misses = 0 if self._step_replaced(trial.replaced, w) else trial.misses + 1
+        trial.record(status)
+        if not (trial.confirmed or trial.failed):
+            return status
+        self._trial = None
+        if trial.confirmed:
+            return status
+        if trial.replaced is None:
+            return "relocalized" if self._from_image(w) else status
+        self.ekf, self.misses, self.gated, self._bumped = trial.replaced, trial.misses, 0, 0
+        self.belief_status = "tracking"
+        if self.monitor is not None:
+            self.monitor.clear()
+        return "reverted"
+
+    def _step_replaced(self, old: PoseEKF, w: Array) -> bool:
+        """Predict (with this step's motion) and update the EKF a restart replaced; whether it
+        accepted the image."""
+        old.predict(*self._motion)
+        z, model = self._measurement(old.x, w)
+        try:
+            return bool(np.all(np.isfinite(z))) and old.update(z, model).accepted
+        except OutOfDomainError:
+            return False
