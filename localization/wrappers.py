@@ -60,7 +60,7 @@ FILTER_OPTIONS = {
                   "n_neighbors", "proposal_noise", "global_proposal_fraction", "sample_free",
                   "lost_ratio", "doubt_ratio", "confident_weight", "confirm_share",
                   "confirm_steps", "unconfirm_steps", "mode_radius", "heading_scale", "max_modes",
-                  "min_mode_weight", "track_mode", "seed"),
+                  "min_mode_weight", "track_mode", "seed", "contact_motion"),
 }
 
 
@@ -274,11 +274,8 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
             raise gym.error.ResetNeeded("call reset() before step()")
         obs, reward, terminated, truncated, info = self.env.step(action)
         w = self.localizer.transform(obs["image"])[0]
-        if isinstance(self.belief, BeliefFilter):
-            nis, status = self.belief.step(self._control(action), w,
-                                           contact=bool(info.get("collision", False)))
-        else:
-            nis, status = self.belief.step(self._control(action), w)
+        nis, status = self.belief.step(self._control(action), w,
+                                       contact=bool(info.get("collision", False)))
         self._publish(info, nis if self.filter == "ekf" else np.nan, status)
         return self.observation(obs), reward, terminated, truncated, info
 

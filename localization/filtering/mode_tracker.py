@@ -149,15 +149,16 @@ class ModeTracker:
         return float(weights[d2 < self.radius ** 2].sum())
 
     def step(self, u: ArrayLike, w: ArrayLike, particles: Array, weights: Array,
-             dominant: Mode) -> str:
-        """Step the EKF with the control ``u`` (2,) and features ``w`` (m,), then choose the
-        report from the particles (N, 3), their weights (N,) and dominant mode.
+             dominant: Mode, contact: bool = False) -> str:
+        """Step the EKF with the control ``u`` (2,) and features ``w`` (m,) (``contact``: a
+        contact step, predicted as blocked), then choose the report from the particles
+        (N, 3), their weights (N,) and dominant mode.
 
         Returns
         -------
         source : one of ``TRACKER_SOURCES``
         """
-        nis, _ = self.ekf.step(u, w)
+        nis, _ = self.ekf.step(u, w, contact)
         if np.isfinite(nis):  # out of domain (NaN) neither adds nor breaks a run
             self.strong = self.strong + 1 if nis > self.strong_nis else 0
         self._mode = None

@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike
 
 from localization.geometry import Array, wrap_angle
 
-__all__ = ["is_unicycle", "predict_particles", "sample_body_noise", "unicycle_step"]
+__all__ = ["is_unicycle", "move_particles", "predict_particles", "sample_body_noise", "unicycle_step"]
 
 _SMALL_W = 1e-6  # as envs.motion_model: below it the arc's second-order expansion
 _PROBES = np.array([[0.3, -1.2, 2.9], [-4.0, 2.5, -0.7], [1.0, 1.0, 0.0], [0.0, 0.0, -3.1]])
@@ -79,3 +79,17 @@ def sample_body_noise(yaw: ArrayLike, Q_body: ArrayLike, rng: np.random.Generato
     e = rng.multivariate_normal(np.zeros(3), Q_body, size=len(yaw), method="eigh")
     c, s = np.cos(yaw), np.sin(yaw)
     return np.column_stack([c * e[:, 0] - s * e[:, 1], s * e[:, 0] + c * e[:, 1], e[:, 2]])
+
+
+def move_particles(motion_model: Any, X: ArrayLike, u: ArrayLike, Q_body: ArrayLike,
+                   rng: np.random.Generator, unicycle: bool | None = None,
+                   Q_extra: ArrayLike | None = None) -> Array:
+    """``X_i = F(X_i, u) + T(yaw_i) e_i``, ``e_i ~ N(0, Q_body)``, plus a world-frame draw of
+    ``N(0, Q_extra)`` each (a contact's, isotropic in x, y); headings wrapped. (N, 3)."""
+    X = predict_particles(motion_model, X, u, unicycle)
+    X += sample_body_noise(X[:, 2], Q_body, rng)
+    if Q_extra is not None:
+        X += rng.multivariate_normal(np.zeros(3), np.asarray(Q_extra, dtype=np.float64),
+                                     size=len(X), method="eigh")
+    return np.column_stack([X[:, :2], wrap_angle(X[:, 2])])
+

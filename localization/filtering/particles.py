@@ -34,19 +34,16 @@ from numpy.typing import ArrayLike
 from scipy.special import logsumexp
 from sklearn.exceptions import NotFittedError
 
-from localization._validation import check_int, check_real
+from localization._validation import check_choice, check_int, check_real
 from localization.filtering._modes import Mode, find_modes
 from localization.filtering.augmented_mcl import LikelihoodAverages
 from localization.filtering.district_particles import check_measurement_noise, image_models
+from localization.filtering.map_contact import CONTACT_MOTIONS, blocked_motion
 from localization.filtering.measurement_noise import inflate
 from localization.filtering.mode_confirmation import ModeConfirmation
 from localization.filtering.mode_tracker import make_tracker
 from localization.filtering.particle_likelihood import MEASUREMENTS
-from localization.filtering.particle_motion import (
-    is_unicycle,
-    predict_particles,
-    sample_body_noise,
-)
+from localization.filtering.particle_motion import is_unicycle, move_particles
 from localization.filtering.resampling import resample_and_inject
 from localization.geometry import Array, wrap_angle
 
@@ -121,6 +118,10 @@ class ParticleBelief:
     cities 11-16 (14-16 look-alike); docs/method.md §13.2 gives the numbers.
     seed : int or None
         Seeds every draw (numpy Generator); the same seed gives the same run.
+    contact_motion : {"blocked", "commanded"}
+        How a contact step moves the particles: blocked (``[0, k w]`` plus a draw of
+        :func:`~localization.filtering.map_contact.blocked_motion`'s covariance each, as the
+        EKF's), or with the commanded control as any other step.
     """
 
     def __init__(self, localizer: Any, motion_model: Any, measurement: str = "representation",
@@ -137,7 +138,7 @@ class ParticleBelief:
                  mode_radius: float = 1.0, heading_scale: float = 2.0, max_modes: int = 64,
                  min_mode_weight: float = 0.002,
                  track_mode: bool | dict[str, Any] = True,
-                 seed: int | None = None) -> None:
+                 seed: int | None = None, contact_motion: str = "blocked") -> None:
         if measurement not in MEASUREMENTS:
             raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
         if isinstance(n_particles, bool) or int(n_particles) != n_particles or n_particles < 1:
@@ -185,6 +186,8 @@ class ParticleBelief:
             self.proposal_noise)
         self.R, self.gate = self.likelihood.R, self.likelihood.gate
         self.rng = np.random.default_rng(seed)
+        self.contact_motion = check_choice(contact_motion, "contact_motion", CONTACT_MOTIONS)
+        self._contact = False  # this step is a blocked contact (the mode tracker's EKF too)
         self.tracker = make_tracker(track_mode, localizer, motion_model, measurement,
                                     alpha=self.alpha, radius=self.mode_radius,
                                     heading_scale=self.heading_scale,
@@ -312,15 +315,18 @@ class ParticleBelief:
         self._fresh = np.zeros(self.n_particles, dtype=bool)
         return self.status
 
-    def predict(self, u: ArrayLike) -> None:
-        """Move every particle: ``X_i = F(X_i, k U) + T(yaw_i) e_i``, ``e_i ~ N(0, Q)``."""
+    def predict(self, u: ArrayLike, contact: bool = False) -> None:
+        """Move every particle: ``X_i = F(X_i, k U) + T(yaw_i) e_i``, ``e_i ~ N(0, Q)``; a
+        ``contact`` step as ``contact_motion`` says."""
         self._check()
         u = np.asarray(u, dtype=np.float64)
         if u.shape != (2,) or not np.all(np.isfinite(u)):
             raise ValueError(f"u (control) must be a finite (2,) [v, w], got {u!r}")
-        X = predict_particles(self.motion_model, self.particles, self.gain * u, self._unicycle)
-        X += sample_body_noise(X[:, 2], self.Q, self.rng)
-        self.particles = np.column_stack([X[:, :2], wrap_angle(X[:, 2])])
+        u_k, Q_contact = self.gain * u, None
+        if contact and self.contact_motion == "blocked":
+            u_k, Q_contact = blocked_motion(self.motion_model, self.particles[0], u_k)
+        self.particles = move_particles(self.motion_model, self.particles, u_k, self.Q,
+                                        self.rng, self._unicycle, Q_contact)
 
     def distances(self, w: ArrayLike, X: ArrayLike | None = None, z: Array | None = None
                   ) -> Array:
@@ -331,9 +337,10 @@ class ParticleBelief:
         z = self.likelihood.measure(w) if z is None else z
         return self.likelihood.distances(z, self.particles if X is None else X)
 
-    def step(self, u: ArrayLike, w: ArrayLike) -> tuple[float, str]:
+    def step(self, u: ArrayLike, w: ArrayLike, contact: bool = False) -> tuple[float, str]:
         """Predict with the commanded control ``u`` (2,), weight with the features ``w``,
-        inject and resample.
+        inject and resample. ``contact``: the robot touched something this step
+        (``info["collision"]``; see ``contact_motion``).
 
         Returns
         -------
@@ -343,7 +350,8 @@ class ParticleBelief:
         """
         self._check()
         w = self._check_w(w)
-        self.predict(u)
+        self.predict(u, contact)
+        self._contact = bool(contact) and self.contact_motion == "blocked"
         self.injected = 0
         z = self.likelihood.measure(w)
         if not np.all(np.isfinite(z)):
@@ -381,7 +389,8 @@ class ParticleBelief:
         """Step the mode tracker; a report most particles disagree with is "doubtful"."""
         if self.tracker is None:
             return
-        source = self.tracker.step(u, w, self.particles, self.weights, self.modes[0])
+        source = self.tracker.step(u, w, self.particles, self.weights, self.modes[0],
+                                   contact=self._contact)
         unsupported = source == "ekf" and self.tracker.support < self.tracker.support_weight
         if unsupported and self.status == "tracking":
             self.status = "doubtful"

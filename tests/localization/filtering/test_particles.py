@@ -100,6 +100,30 @@ def test_resampling_fires_when_the_effective_sample_size_drops(localizer, featur
     assert len(calls) == 1 and lazy.ess < lazy.n_particles  # weighted, not resampled
 
 
+def test_a_blocked_contact_holds_the_particles_and_spreads_them_by_the_step(localizer, features):
+    """As the EKF's: no translation, the commanded step as one standard deviation."""
+    W, poses, controls = features
+    u = np.array([1.0, 0.0])
+    moved, held, commanded = (_belief(localizer, contact_motion=m) for m in
+                              ("blocked", "blocked", "commanded"))
+    for pf in (moved, held, commanded):
+        pf.reset(W[0], x0=poses[0])
+    start = held.particles.copy()
+    moved.predict(u)
+    held.predict(u, contact=True)
+    commanded.predict(u, contact=True)
+    np.testing.assert_array_equal(moved.particles, commanded.particles)  # same draws
+    step = DT * localizer.control_gain_[0]
+    shift = np.mean(held.particles[:, :2] - start[:, :2], axis=0)
+    assert np.hypot(*shift) < 0.2 * step  # held on the spot (the mean of the draws)
+    assert np.hypot(*(np.mean(moved.particles[:, :2] - start[:, :2], axis=0))) > 0.8 * step
+    spread = np.std(held.particles[:, :2] - start[:, :2], axis=0)
+    assert np.all(spread > 0.8 * step)  # the step is one standard deviation, both axes
+    assert held.contact_motion == "blocked"
+    with pytest.raises(ValueError, match="contact_motion"):
+        _belief(localizer, contact_motion="slide")
+
+
 # ---------------------------------------------------------------- modes
 def test_dominant_mode_summary_of_two_modes_is_the_heavier_one(localizer, features):
     rng = np.random.default_rng(0)
