@@ -46,6 +46,7 @@ from localization._localizer_noise import check_data, novelty
 from localization._validation import check_array, check_int, check_real
 from localization.geometry import Array, body_to_world
 from localization.gse.graph import DisconnectedGraphError
+from localization.gse.inverse import refine_poses
 from localization.localizer import AppearanceLocalizer
 
 __all__ = ["District", "DistrictLocalizer", "district_cells", "transform_maps"]
@@ -373,7 +374,22 @@ class DistrictLocalizer(DistrictNoiseMixin):
         for d in self.districts_:
             d.check_ready()
 
-    def predict(self, images: ArrayLike) -> Array:
+    def predict(self, images: ArrayLike, refine: int = 0) -> Array:
         """psi* (n, 3) of images, each by the district chosen as in :meth:`initial_belief`
-        (NaN rows where no district's maps hold)."""
-        return np.array([self.measure(w, "pose") for w in self.transform(images)])
+        (NaN rows where no district's maps hold); ``refine`` > 0: that many Gauss-Newton
+        steps with the chosen district's maps (:meth:`AppearanceLocalizer.predict`)."""
+        refine = check_int(refine, "refine", low=0)
+        out = []
+        for w in self.transform(images):
+            found = self.candidates(w)
+            if not found:
+                out.append(np.full(3, np.nan))
+                continue
+            _, k, x = found[0]
+            if refine:
+                loc, wk = self.districts_[k], self._views[k].select(w)[None]
+                theta = refine_poses(loc.regressor_, wk, loc.to_model(x), loc.feature_whitener(),
+                                     refine)
+                x = loc.from_model(theta)[0]
+            out.append(x)
+        return np.array(out)

@@ -222,3 +222,26 @@ def test_looks_share_one_cnn_run_per_image(train, test_set, monkeypatch):
                         lambda self, x: calls.append(len(x)) or embeddings(self, x))
     np.testing.assert_array_equal(loc.transform(images), expected)
     assert calls == [len(images)]
+
+
+def test_predict_refines_with_the_chosen_look(exp, test_set):
+    _, _, night = test_set
+    psi = exp.predict(night[:20])
+    np.testing.assert_array_equal(exp.predict(night[:20], refine=0), psi)
+    refined = exp.predict(night[:20], refine=3)
+    assert np.array_equal(np.isfinite(refined), np.isfinite(psi))
+    W = exp.transform(night[:20])
+    for w, x0, x in zip(W, psi, refined):  # each image's whitened cost never rises
+        if not np.all(np.isfinite(x0)):
+            continue
+        view = exp.local(x0, w)
+        loc, wk = view.localizer, view.select(w)[None]
+        L = loc.feature_whitener()
+
+        def cost(pose):
+            return float(np.sum(((wk - loc.regressor_.predict_features(
+                loc.to_model(pose))) @ L.T) ** 2))
+
+        assert cost(x) <= cost(x0) + 1e-9
+    with pytest.raises(ValueError, match="refine"):
+        exp.predict(night[:2], refine=-1)
