@@ -382,6 +382,14 @@ def nees_band(n_runs: int, prob: float = 0.95, dof: int = 3) -> tuple[float, flo
     return float(lo), float(hi)
 
 
+def _nan_mean(x: Array) -> float:
+    """Mean of the entries that are not NaN; NaN (no warning) when there are none (a run whose every
+    image was out of the maps' domain has no NIS)."""
+    x = np.asarray(x, dtype=np.float64)
+    ok = ~np.isnan(x)
+    return float(x[ok].mean()) if ok.any() else float("nan")
+
+
 def track_metrics(run: TrackResult) -> dict[str, float]:
     """Scores of one run (positions in metres, headings in radians)."""
     err = np.hypot(*(run.mean[:, :2] - run.true[:, :2]).T)
@@ -393,6 +401,6 @@ def track_metrics(run: TrackResult) -> dict[str, float]:
             "ratio": rmse / rmse_dr if rmse_dr > 0 else float("nan"),
             "final_error": float(err[-1]), "final_error_dead_reckoning": float(dr[-1]),
             "max_error": float(err.max()), "yaw_rmse": float(np.sqrt(np.mean(yaw ** 2))),
-            "nees_mean": float(np.mean(run.nees)), "nis_mean": float(np.nanmean(run.nis)),
+            "nees_mean": float(np.mean(run.nees)), "nis_mean": _nan_mean(run.nis),
             "nis_dof": run.nis_dof, "accepted": float(np.mean(status == "accepted")),
             "ms_per_step": 1e3 * run.seconds_per_step}
