@@ -161,7 +161,7 @@ class DistrictLocalizer(DistrictNoiseMixin):
         bar: Any = range(len(groups))
         if progress is not None:
             from tqdm import tqdm
-            bar = tqdm(bar, desc=progress, unit=progress.rstrip("s"))
+            bar = tqdm(bar, desc=progress, unit="map")
         for k in bar:
             loc, keep = self._fit_district(k, images, poses, groups[k], camera, city, params)
             self.districts_.append(loc)

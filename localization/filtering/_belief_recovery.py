@@ -4,8 +4,7 @@ belief it replaced (:mod:`~localization.filtering.restart_trial`), and the diver
 monitor's restarts (docs/method.md §13, §13.1).
 
 The host class provides ``ekf``, ``misses``, ``gated``, ``belief_status``, ``monitor``,
-``localizer``, ``motion_model``, ``last_update``, the step's motion ``_motion`` (its control
-and extra process noise), ``_trial``, ``_placed``, ``_forced``, ``_bumped``,
+``localizer``, ``motion_model``, ``last_update``, ``_trial``, ``_placed``, ``_forced``, ``_bumped``,
 ``_lost_now`` / ``_doubtful_now``, ``_start``, ``_from_image`` and ``_measurement``.
 """
 
@@ -21,6 +20,9 @@ from localization.geometry import Array
 
 __all__ = ["RecoveryMixin"]
 
+#: a step's control k U (2,) and its extra process noise (3, 3) or None (BeliefFilter._step_motion)
+Motion = tuple[Array, Array | None]
+
 
 class RecoveryMixin:
     """Restarts, their trials and the divergence watch of the belief filter."""
@@ -33,7 +35,6 @@ class RecoveryMixin:
     localizer: Any
     motion_model: Any
     last_update: Any
-    _motion: tuple[Array, Array | None]
     _trial: RestartTrial | None
     _placed: bool
     _forced: bool
@@ -61,10 +62,11 @@ class RecoveryMixin:
         which had ``misses`` steps without an accepted measurement (:meth:`_on_trial`)."""
         self._trial = RestartTrial(replaced, misses)
 
-    def _watch(self, w: Array, nis: float, status: str) -> str:
-        """Feed the divergence monitor; restart from the proposals when it says so."""
+    def _watch(self, motion: Motion, w: Array, nis: float, status: str) -> str:
+        """Feed the divergence monitor (its proposals moved by this step's ``motion``);
+        restart from the proposals when it says so."""
         assert self.ekf is not None and self.monitor is not None
-        self.monitor.move_proposals(self.motion_model, self._motion[0])
+        self.monitor.move_proposals(self.motion_model, motion[0])
         psi = np.asarray(self.localizer.measure(w, "pose"), dtype=np.float64)
         dim_z = self.last_update.dim_z if self.last_update is not None else 3
         verdict = self.monitor.observe(nis, dim_z, psi, self.ekf.x, self.ekf.P,
@@ -93,7 +95,7 @@ class RecoveryMixin:
             self._put_on_trial(prior, kept[0])
         return ok or forced  # an unknown start takes the agreed place either way
 
-    def _on_trial(self, w: Array, status: str) -> str:
+    def _on_trial(self, motion: Motion, w: Array, status: str) -> str:
         """One step of a (re)start on trial (:mod:`~localization.filtering.restart_trial`):
         the EKF it replaced runs on beside it; once the trial fails, that EKF comes back
         ("reverted"), or with nothing to come back to (a start from one image) the belief
@@ -102,7 +104,8 @@ class RecoveryMixin:
         trial = self._trial
         assert trial is not None and self.ekf is not None
         if trial.replaced is not None:
-            trial.misses = 0 if self._step_replaced(trial.replaced, w) else trial.misses + 1
+            replaced_ok = self._step_replaced(trial.replaced, motion, w)
+            trial.misses = 0 if replaced_ok else trial.misses + 1
         trial.record(status)
         if not (trial.confirmed or trial.failed):
             return status
@@ -117,10 +120,10 @@ class RecoveryMixin:
             self.monitor.clear()
         return "reverted"
 
-    def _step_replaced(self, old: PoseEKF, w: Array) -> bool:
-        """Predict (with this step's motion) and update the EKF a restart replaced; whether it
-        accepted the image."""
-        old.predict(*self._motion)
+    def _step_replaced(self, old: PoseEKF, motion: Motion, w: Array) -> bool:
+        """Predict with this step's ``motion`` and update the EKF a restart replaced; whether
+        it accepted the image."""
+        old.predict(*motion)
         z, model = self._measurement(old.x, w)
         try:
             return bool(np.all(np.isfinite(z))) and old.update(z, model).accepted

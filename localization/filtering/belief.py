@@ -52,6 +52,7 @@ from localization.filtering.map_contact import (
     check_free_space,
     contact_contradicts,
 )
+from localization.filtering.recorded_run import run_recorded
 from localization.filtering.restart_trial import CONFIRM_STEPS, RestartTrial
 from localization.geometry import Array
 
@@ -282,8 +283,8 @@ class BeliefFilter(RecoveryMixin):
         """
         self._check()
         assert self.ekf is not None
-        self._motion = self._step_motion(u, contact)
-        self.ekf.predict(*self._motion)
+        motion = self._step_motion(u, contact)
+        self.ekf.predict(*motion)
         w = np.asarray(w, dtype=np.float64)
         nis, status = self._update(w)
         self.gated = self.gated + 1 if status == "gated" else 0
@@ -303,9 +304,9 @@ class BeliefFilter(RecoveryMixin):
         if status == "relocalized":
             self.belief_status = "relocalizing"
         elif self._trial is not None:
-            status = self._on_trial(w, status)
+            status = self._on_trial(motion, w, status)
         elif self.monitor is not None:
-            status = self._watch(w, nis, status)
+            status = self._watch(motion, w, nis, status)
         self._bumped = max(self._bumped - 1, 0)
         if contact and self.free_space is not None and contact_contradicts(
                 self.free_space, self.ekf.x, self.ekf.P):
@@ -374,16 +375,5 @@ class BeliefFilter(RecoveryMixin):
         covs : (n + 1, 3, 3)
         statuses : list of n + 1 str
         """
-        W = np.asarray(W, dtype=np.float64)
-        controls = np.asarray(controls, dtype=np.float64)
-        if len(W) != len(controls) + 1:
-            raise ValueError(f"need one more frame than controls, got {len(W)} and "
-                             f"{len(controls)}")
-        statuses = [self.reset(W[0], x0, P0)]
-        means, covs = [self.x], [self.P]
-        for u, w in zip(controls, W[1:]):
-            statuses.append(self.step(u, w)[1])
-            means.append(self.x)
-            covs.append(self.P)
-        return np.array(means), np.array(covs), statuses
+        return run_recorded(self, W, controls, lambda w: self.reset(w, x0, P0))
 

@@ -44,6 +44,7 @@ from localization.filtering.mode_confirmation import ModeConfirmation
 from localization.filtering.mode_tracker import make_tracker
 from localization.filtering.particle_likelihood import MEASUREMENTS
 from localization.filtering.particle_motion import is_unicycle, move_particles
+from localization.filtering.recorded_run import run_recorded
 from localization.filtering.resampling import resample_and_inject
 from localization.geometry import Array, wrap_angle
 
@@ -187,7 +188,6 @@ class ParticleBelief:
         self.R, self.gate = self.likelihood.R, self.likelihood.gate
         self.rng = np.random.default_rng(seed)
         self.contact_motion = check_choice(contact_motion, "contact_motion", CONTACT_MOTIONS)
-        self._contact = False  # this step is a blocked contact (the mode tracker's EKF too)
         self.tracker = make_tracker(track_mode, localizer, motion_model, measurement,
                                     alpha=self.alpha, radius=self.mode_radius,
                                     heading_scale=self.heading_scale,
@@ -351,13 +351,13 @@ class ParticleBelief:
         self._check()
         w = self._check_w(w)
         self.predict(u, contact)
-        self._contact = bool(contact) and self.contact_motion == "blocked"
+        contact = bool(contact) and self.contact_motion == "blocked"
         self.injected = 0
         z = self.likelihood.measure(w)
         if not np.all(np.isfinite(z)):
             self._set(self.particles, self.log_weights)
             self.status = "out_of_domain"
-            self._track(u, w)
+            self._track(u, w, contact)
             return np.nan, self.status
         log_L = self.likelihood.log_likelihood(z, self.particles)
         old = self.log_weights[~self._fresh] if (~self._fresh).any() else self.log_weights
@@ -378,19 +378,19 @@ class ParticleBelief:
             self.confirmation.withdraw()
         self._confirm(w)
         self.status = self._status(w_avg)
-        self._track(u, w)
+        self._track(u, w, contact)
         return w_avg, self.status
 
     def _draw(self, share: float) -> int:
         """How many particles to inject at this share: Binomial(N, share)."""
         return int(self.rng.binomial(self.n_particles, share)) if share > 0 else 0
 
-    def _track(self, u: ArrayLike, w: Array) -> None:
-        """Step the mode tracker; a report most particles disagree with is "doubtful"."""
+    def _track(self, u: ArrayLike, w: Array, contact: bool) -> None:
+        """Step the mode tracker (``contact``: a blocked contact step); a report most
+        particles disagree with is "doubtful"."""
         if self.tracker is None:
             return
-        source = self.tracker.step(u, w, self.particles, self.weights, self.modes[0],
-                                   contact=self._contact)
+        source = self.tracker.step(u, w, self.particles, self.weights, self.modes[0], contact)
         unsupported = source == "ekf" and self.tracker.support < self.tracker.support_weight
         if unsupported and self.status == "tracking":
             self.status = "doubtful"
@@ -436,18 +436,5 @@ class ParticleBelief:
         covs : (n + 1, 3, 3)
         statuses : list of n + 1 str
         """
-        W, controls = np.asarray(W, dtype=np.float64), np.asarray(controls, dtype=np.float64)
-        if W.ndim != 2 or controls.shape != (len(W) - 1, 2):
-            raise ValueError(f"need W (n + 1, m) and controls (n, 2), got {W.shape} and "
-                             f"{controls.shape}")
-        statuses = [self.reset(W[0], mode, x0, P0)]
-        means, covs = [self.pose_mean], [self.pose_cov]
-        record = (lambda: None) if hypotheses is None else \
-            (lambda: hypotheses.append(self.hypotheses))
-        record()
-        for u, w in zip(controls, W[1:]):
-            statuses.append(self.step(u, w)[1])
-            means.append(self.pose_mean)
-            covs.append(self.pose_cov)
-            record()
-        return np.array(means), np.array(covs), statuses
+        record = None if hypotheses is None else (lambda: hypotheses.append(self.hypotheses))
+        return run_recorded(self, W, controls, lambda w: self.reset(w, mode, x0, P0), record)
