@@ -42,9 +42,12 @@ class Episode:
         by ``info["kidnapped"]``, is not counted).
     shortest : float — length (m) of the shortest street path from the start to the goal, less
         the goal radius (the episode ends that close to the goal).
-    collision_steps : int — steps in which the robot touched a building or the boundary.
+    collision_steps : int — steps in which the robot touched anything (a building, the
+        boundary or a moving object).
     final_distance : float — distance (m) to the goal at the end.
     belief_rmse : float — RMS distance (m) between the belief mean and the true position.
+    traffic_collision_steps : int — of ``collision_steps``, those that touched a moving object
+        (``"traffic"`` in ``info["collision_with"]``): hazards an agent may not be able to avoid.
     """
 
     seed: int
@@ -56,6 +59,7 @@ class Episode:
     collision_steps: int
     final_distance: float
     belief_rmse: float
+    traffic_collision_steps: int = 0
 
     @property
     def path_ratio(self) -> float:
@@ -123,7 +127,7 @@ def run_episode(env: gym.Env, agent: Any, seed: int, planner: StreetPlanner | No
     reads_info = "info" in inspect.signature(agent.act).parameters  # e.g. belief_status
     start = info["pose"].copy()
     shortest = max(path_length(planner.plan(start[:2], base.goal)) - base.GOAL_RADIUS, 0.0)
-    travelled, collisions, sq_err, steps = 0.0, 0, [], 0
+    travelled, collisions, traffic, sq_err, steps = 0.0, 0, 0, [], 0
     terminated = truncated = False
     prev = start[:2]
     while not (terminated or truncated) and (max_steps is None or steps < max_steps):
@@ -134,13 +138,15 @@ def run_episode(env: gym.Env, agent: Any, seed: int, planner: StreetPlanner | No
             travelled += float(np.hypot(*(pose[:2] - prev)))
         prev = pose[:2]
         collisions += bool(info["collision"])
+        traffic += "traffic" in info.get("collision_with", ())
         sq_err.append(float(np.sum((np.asarray(obs["pose_mean"][:2], float) - pose[:2]) ** 2))
                       if "pose_mean" in obs else np.nan)
         steps += 1
     return Episode(seed=int(seed), success=bool(terminated), steps=steps, time=steps * base.dt,
                    path_length=travelled, shortest=shortest, collision_steps=collisions,
                    final_distance=float(info["distance_to_goal"]),
-                   belief_rmse=float(np.sqrt(np.mean(sq_err))) if sq_err else np.nan)
+                   belief_rmse=float(np.sqrt(np.mean(sq_err))) if sq_err else np.nan,
+                   traffic_collision_steps=traffic)
 
 
 def run_episodes(env: gym.Env, agent: Any, seeds: Iterable[int], progress: bool = True,
@@ -162,7 +168,8 @@ def summarize(episodes: Sequence[Episode]) -> dict[str, float]:
     Returns
     -------
     dict with ``episodes``; ``success_rate`` (binomial standard error); ``spl`` (see
-    :func:`spl`); ``collisions_per_episode`` (steps in contact); ``collision_episodes``
+    :func:`spl`); ``collisions_per_episode`` (steps in contact; ``traffic_collisions_per_episode``
+    those with a moving object); ``collision_episodes``
     (share of episodes with any contact); ``time_to_goal`` (simulated s) and ``path_ratio``
     (travelled / shortest), over successes; ``belief_rmse`` (m, over every step of every
     episode, its standard error by the delta method from the episodes' mean squared errors).
@@ -176,6 +183,8 @@ def summarize(episodes: Sequence[Episode]) -> dict[str, float]:
                              "success_rate_se": float(np.sqrt(p * (1 - p) / n))}
     for name, values in (("spl", [e.spl for e in episodes]),
                          ("collisions_per_episode", [e.collision_steps for e in episodes]),
+                         ("traffic_collisions_per_episode",
+                          [e.traffic_collision_steps for e in episodes]),
                          ("collision_episodes", [e.collision_steps > 0 for e in episodes]),
                          ("time_to_goal", [e.time for e in ok]),
                          ("path_ratio", [e.path_ratio for e in ok])):

@@ -105,8 +105,10 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
 
     Observation ``{"image": (H, W, 3) uint8, "goal": (2,) float32 world position}``.
     ``info``: ``pose`` [x, y, yaw] float64 (the true pose, never in the observation),
-    ``collision`` (the robot touched a building or the city's invisible boundary wall
-    during the step), ``distance_to_goal`` (m), ``control`` (the clipped U applied); with
+    ``collision`` (the robot touched a building, the city's invisible boundary wall or a
+    moving object during the step), ``collision_with`` (what it touched: a tuple of
+    ``"city"`` (buildings and the boundary) and ``"traffic"`` (vehicles and pedestrians),
+    empty without contact), ``distance_to_goal`` (m), ``control`` (the clipped U applied); with
     ``city_layout="lookalike"`` also ``twins`` (m, 3): the true pose's twin poses in the city
     (:meth:`envs.lookalike.LookalikeCity.twins`); ``conditions`` (dict): the episode's
     conditions (:meth:`envs.conditions.Conditions.to_info`; ``holds`` lists those that
@@ -235,7 +237,7 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         self.set_pose(pose)
         self._steps = 0
         self._distance = self._distance_to_goal()
-        return self._obs(), self._info(collision=False, control=np.zeros(2))
+        return self._obs(), self._info((), control=np.zeros(2))
 
     def step(self, action: ArrayLike) -> tuple[Obs, float, bool, bool, dict[str, Any]]:
         """Apply ``U = [v, w]`` for ``dt`` seconds (see the class notes for clipping and errors)."""
@@ -243,11 +245,12 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         self.data.ctrl[:] = self._wheel_speeds(u)
         if self._conditions.traffic is not None:
             self._conditions.advance(self.data, self.dt, self.pose[:2])
-        collision = False
+        city_hit = traffic_hit = False
         for _ in range(self.frame_skip):  # the contact sensor sees the state at the start of each substep
             mujoco.mj_step(self.model, self.data)
-            collision = (collision or self.data.sensordata[self._collision_adr] > 0
-                         or self._conditions.hit(self.data))
+            city_hit = city_hit or bool(self.data.sensordata[self._collision_adr] > 0)
+            traffic_hit = traffic_hit or self._conditions.hit(self.data)
+        collision = city_hit or traffic_hit
         self._sync_kinematics()
         self._steps += 1
         pose = self.pose
@@ -256,7 +259,9 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         self._distance = distance
         terminated = distance < self.GOAL_RADIUS
         truncated = self.max_episode_steps is not None and self._steps >= self.max_episode_steps
-        return self._obs(), float(reward), bool(terminated), bool(truncated), self._info(collision, u, pose)
+        with_ = ("city",) * city_hit + ("traffic",) * traffic_hit
+        return (self._obs(), float(reward), bool(terminated), bool(truncated),
+                self._info(with_, u, pose))
 
     def render(self) -> NDArray[np.uint8] | None:
         """Return a top-down view (north up) of the city, robot and goal, or None without a render mode."""
@@ -360,12 +365,13 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
     def _obs(self) -> Obs:
         return {"image": self.render_camera(), "goal": self._goal.astype(np.float32)}
 
-    def _info(self, collision: bool, control: NDArray[np.float64], pose: NDArray[np.float64] | None = None
-              ) -> dict[str, Any]:
+    def _info(self, collided_with: tuple[str, ...], control: NDArray[np.float64],
+              pose: NDArray[np.float64] | None = None) -> dict[str, Any]:
         pose = self.pose if pose is None else pose
         info = {
             "pose": pose,
-            "collision": bool(collision),
+            "collision": bool(collided_with),
+            "collision_with": collided_with,
             "distance_to_goal": math.hypot(pose[0] - self._goal[0], pose[1] - self._goal[1]),
             "control": np.asarray(control, dtype=np.float64),
             "conditions": dict(self._conditions.info),

@@ -136,11 +136,12 @@ def test_collision_and_reward():
     if not e.city.is_free(x0, y0, 0.25):
         pytest.skip("no clearance west of the first building")
     e.reset(seed=0, options={"pose": [x0, y0, 0.0], "goal": GOAL})
-    hits = [e.step([1.0, 0.0])[4]["collision"] for _ in range(10)]
-    assert any(hits)
+    infos = [e.step([1.0, 0.0])[4] for _ in range(10)]
+    assert any(i["collision"] for i in infos)
+    assert all(i["collision_with"] == (("city",) if i["collision"] else ()) for i in infos)
     e.reset(seed=0, options={"pose": START, "goal": GOAL})
     _, r, _, _, info = e.step([1.0, 0.0])  # straight at the goal: progress minus step cost
-    assert r > 0 and not info["collision"]
+    assert r > 0 and not info["collision"] and info["collision_with"] == ()
     e.reset(seed=0, options={"pose": [8.4, -9.0, 0.0], "goal": GOAL})
     terminated = any(e.step([1.0, 0.0])[2] for _ in range(3))
     assert terminated

@@ -71,11 +71,20 @@ def _collision_targets(summary: dict[str, dict[str, float]]) -> list[dict[str, A
         truth = summary.get(f"{agent}/oracle/{condition}")
         if source in BELIEFS and truth is not None:
             limit = truth["collisions_per_episode"] + TARGETS["collision_margin"]
-            out.append(_target(f"{agent} on {source}, {condition}: collisions per episode",
+            out.append(_target(f"{agent} on {source}, {condition}: collisions per episode"
+                               + _traffic_share(row, truth),
                                row["collisions_per_episode"], f"<= {limit:.3f} (true pose + "
                                f"{TARGETS['collision_margin']})",
                                row["collisions_per_episode"] <= limit))
     return out
+
+
+def _traffic_share(row: dict[str, float], truth: dict[str, float]) -> str:
+    """" (with moving objects: belief x, true pose y)" where either touched one."""
+    on_row, on_truth = (r.get("traffic_collisions_per_episode", 0.0) for r in (row, truth))
+    if not on_row and not on_truth:
+        return ""
+    return f" (with moving objects: {on_row:.2f}, true pose {on_truth:.2f})"
 
 
 def success_matrix(result: dict[str, Any]) -> str:

@@ -92,6 +92,13 @@ def test_targets_from_rows() -> None:
                    "scripted on the particle belief, one kidnap: success": True,
                    "scripted on the EKF belief, night (randomised localizer): success": True,
                    "scripted on ekf, nominal: collisions per episode": False}
+    traffic = {"scripted/oracle/traffic": {"success_rate": 1.0, "collisions_per_episode": 2.0,
+                                           "traffic_collisions_per_episode": 2.0},
+               "scripted/ekf/traffic": {"success_rate": 0.5, "collisions_per_episode": 5.0,
+                                        "traffic_collisions_per_episode": 1.5}}
+    assert [t["target"] for t in targets(traffic) if "collisions" in t["target"]] == [
+        "scripted on ekf, traffic: collisions per episode (with moving objects: 1.50, "
+        "true pose 2.00)"]
 
 
 def test_parallel_episodes_equal_the_serial_run(tmp_path: Path) -> None:
