@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from scipy.sparse.csgraph import connected_components
 from threadpoolctl import threadpool_limits
 
 from localization.intrinsic_dim import (
@@ -14,7 +15,11 @@ from localization.intrinsic_dim import (
     loop_cut_mask,
     pointwise_dimension,
 )
-from localization.synthetic import curved_3manifold, helix, swiss_roll
+from localization.intrinsic_dim_geodesic import (
+    geodesic_correlation_dimension,
+    mutual_knn_mst_graph,
+)
+from localization.synthetic import curved_3manifold, helix, route_manifold, swiss_roll
 
 
 @pytest.fixture(autouse=True)
@@ -130,3 +135,72 @@ def test_loop_cut_leaves_open_manifolds_alone(make, true):
 def test_loop_cut_bad_fraction():
     with pytest.raises(ValueError, match="cut_fraction"):
         loop_cut_mask(helix(100, seed=0)[0], cut_fraction=0.5)
+
+
+# --- geodesic correlation dimension (localization.intrinsic_dim_geodesic) -------------------
+
+
+def rough_curve(n: int = 1500, ambient: int = 50, seed: int = 0) -> np.ndarray:
+    """A random walk in R^ambient: a curve whose Euclidean distances grow like the square
+    root of the arc length (as images along a route do), so Euclidean estimators read ~2."""
+    return np.cumsum(np.random.default_rng(seed).normal(size=(n, ambient)), axis=0)
+
+
+def torus(n: int, d: int, seed: int = 0, ambient: int = 30) -> np.ndarray:
+    """A flat d-torus (no boundary), orthonormally embedded in R^ambient."""
+    rng = np.random.default_rng(seed)
+    t = rng.uniform(0.0, 2.0 * np.pi, (n, d))
+    basis = np.linalg.qr(rng.normal(size=(ambient, 2 * d)))[0]
+    return np.hstack([np.cos(t), np.sin(t)]) @ basis.T
+
+
+@pytest.mark.parametrize(("make", "true"), [
+    (closed_curve, 1),  # a loop reads 1 without a cut
+    (rough_curve, 1),
+    (lambda: route_manifold(1500, seed=0)[0], 1),  # 1.5 laps of a closed route
+    (lambda: swiss_roll(1500, seed=0)[0], 2),
+    (lambda: torus(1500, 2), 2),
+])
+def test_geodesic_correlation_dimension_recovers_true_dimension(make, true):
+    est = geodesic_correlation_dimension(make())
+    assert est.rounded == true and abs(est.value - true) < 0.3
+    assert est.method == "geodesic_correlation_dimension"
+    d = est.details
+    assert d["radii"].shape == d["correlation"].shape and np.all(np.diff(d["radii"]) > 0)
+    assert 0.004 < d["correlation"][0] < d["correlation"][-1] < 0.06
+
+
+def test_geodesic_correlation_dimension_reads_low_in_three_dimensions():
+    """Documented bias: multi-hop graph paths zigzag, so in 3-D the slope reads ~2.5."""
+    three = geodesic_correlation_dimension(torus(2000, 3)).value
+    assert 2.3 < three < 3.2
+    assert three > geodesic_correlation_dimension(torus(2000, 2)).value + 0.4
+
+
+def test_geodesic_beats_euclidean_on_a_rough_curve():
+    X = rough_curve()
+    assert local_dimension(X).value > 1.6  # Euclidean correlation dimension is fooled
+    assert geodesic_correlation_dimension(X).value < 1.3
+
+
+def test_mutual_knn_mst_graph_is_connected_and_symmetric():
+    X = np.vstack([helix(300, seed=0)[0], helix(300, seed=1)[0] + 50.0])  # two far pieces
+    D = np.linalg.norm(X[:, None] - X[None], axis=2)
+    G = mutual_knn_mst_graph(D, 5)
+    assert abs(G - G.T).max() == 0
+    assert connected_components(G, directed=False)[0] == 1  # the tree joins the pieces
+    assert (G > 40).nnz == 2  # by one edge only (both directions)
+
+
+def test_geodesic_bad_parameters():
+    X = swiss_roll(200, seed=0)[0]
+    with pytest.raises(ValueError, match="pair_range"):
+        geodesic_correlation_dimension(X, pair_range=(0.1, 0.05))
+    with pytest.raises(ValueError, match="n_scales"):
+        geodesic_correlation_dimension(X, n_scales=1)
+    with pytest.raises(ValueError, match="n_neighbors"):
+        geodesic_correlation_dimension(X, n_neighbors=0)
+    with pytest.raises(ValueError, match="at least"):
+        geodesic_correlation_dimension(X[:5])
+    with pytest.raises(ValueError, match="n_neighbors"):
+        mutual_knn_mst_graph(np.zeros((3, 3)), 3)
