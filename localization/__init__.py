@@ -42,6 +42,7 @@ _LAZY = {
     "rrmse": "metrics", "rmse": "metrics", "angular_rmse": "metrics",
     "angular_error": "metrics",
     "intrinsic_dimension_table": "intrinsic_dim", "global_dimension": "intrinsic_dim",
+    "geodesic_correlation_dimension": "intrinsic_dim_geodesic",
     # filtering
     "PoseEKF": "filtering", "PoseMeasurement": "filtering",
     "FunctionMeasurement": "filtering", "OutOfDomainError": "filtering",
@@ -89,6 +90,7 @@ __all__ = [
     "cov_to_triu",
     "features_from_state",
     "fit_city_localizer",
+    "geodesic_correlation_dimension",
     "global_dimension",
     "grid_search",
     "intrinsic_dimension_table",

@@ -110,12 +110,20 @@ def _rows(report: dict[str, Any], dataset: str) -> dict[tuple[str, str], dict[st
     return rows
 
 
+def _readings(values: list[Any]) -> str:
+    """"a, b, c (1 in k/n)" of rounded readings."""
+    out = ", ".join(f"{v:.0f}" for v in values)
+    return out + (f" (1 in {sum(v == 1 for v in values)}/{len(values)})" if len(values) > 1 else "")
+
+
 def _table1_row(label: str, t: dict[str, Any], paper: tuple[Any, ...]) -> str:
     seeds = t.get("global_seeds") or [t["global"]]
-    glob = ", ".join(f"{g:.0f}" for g in seeds)
-    ones = f" (1 in {sum(g == 1 for g in seeds)}/{len(seeds)})" if len(seeds) > 1 else ""
+    slopes = t.get("global_values")
+    slope = f" [{min(slopes):.2f}-{max(slopes):.2f}]" if slopes else ""
+    iso = t.get("isomap_seeds")
     no_cut = t.get("global_no_cut")
-    return (f"| {label} | {glob}{ones} | {'-' if no_cut is None else f'{no_cut:.0f}'} | "
+    return (f"| {label} | {_readings(seeds)}{slope} | {'-' if iso is None else _readings(iso)} | "
+            f"{'-' if no_cut is None else f'{no_cut:.0f}'} | "
             f"{t['local']:.1f} | {t['pointwise']:.1f} | "
             + ("-" if paper[0] == "-" else f"{paper[0]} / {paper[1]} / {paper[2]}") + " |")
 
@@ -129,9 +137,10 @@ def tables_markdown(report: dict[str, Any]) -> str:
              f"(seed {a['split_seed']})"), "",
              ("## Table 1: intrinsic dimension of the route images (raw pixels; the random 3-DoF "
               "images below)"), "",
-             ("| camera | global (Isomap, loop cut; every seed) | global, no cut | local (corr. "
-              "dim.) | pointwise (MLE) | paper (global / local / pointwise) |"),
-             "|---|---:|---:|---:|---:|---|"]
+             ("| camera | global (geodesic corr. dim.; every seed [slopes]) | Isomap, loop cut "
+              "| Isomap, no cut | local (corr. dim.) | pointwise (MLE) | paper (global / local / "
+              "pointwise) |"),
+             "|---|---:|---:|---:|---:|---:|---|"]
     for cam, t in report["table1"].items():
         lines.append(_table1_row(cam, t, PAPER_TABLE1.get(cam, ("-",) * 3)))
     for cam, t in (report.get("table1_random") or {}).items():
