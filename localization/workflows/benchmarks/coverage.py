@@ -17,8 +17,9 @@ neighbours and the training size were chosen on tuning cities 12 and 13 (64 x 64
   gave 0.28 / 0.29 / 0.25 / 0.26 / 0.28 m on city 12 and 10 / 15 / 20 gave 0.30 / 0.28 /
   0.29 m on city 13;
 - size (city 12, SmallCNN): 20000 0.29 m, 40000 0.21 m (10 neighbours), 80000 0.16 m, 100000
-  0.13 m (15 neighbours; the fit 177 s, the whole run's peak memory 5.1 GB), still falling: the default is
-  the issue's 100000.
+  0.13 m (15 neighbours; the fit 177 s, the whole run's peak memory 5.1 GB), still falling;
+  the refined estimate (``predict(refine=3)``) 71.2 / 88.2 % within (0.25 m, 2 deg) /
+  (0.5 m, 5 deg) at 100000 and 75.8 / 91.2 % at 200000 (stop 34): the default is 200000.
 
 The corner weight of the coverage poses was chosen on city 13 (docs/method.md §12). Per city
 and camera one localizer is fitted on ``n_train`` images over the whole street surface at
@@ -101,7 +102,7 @@ class CoverageBenchConfig:
         "help": "comma-separated cameras (perspective, fisheye, catadioptric)"})
     image_size: int = field(default=64, metadata={"help": "square image side (px)"})
     motion_noise: float = field(default=0.1, metadata={"help": "env actuation noise"})
-    n_train: int = field(default=100_000, metadata={
+    n_train: int = field(default=200_000, metadata={
         "help": "coverage training images per city and camera"})
     features: str = field(default="small_cnn", metadata={
         "help": "small_cnn (the packaged SmallCNN of the camera, trained pose-contrastively on "
