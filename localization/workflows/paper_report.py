@@ -110,19 +110,24 @@ def _rows(report: dict[str, Any], dataset: str) -> dict[tuple[str, str], dict[st
     return rows
 
 
-def _readings(values: list[Any]) -> str:
-    """"a, b, c (1 in k/n)" of rounded readings."""
+def _readings(values: list[Any], count_ones: bool = True) -> str:
+    """"a, b, c (1 in k/n)" of rounded readings (the count only with ``count_ones``: the
+    route, whose reading by design is 1)."""
     out = ", ".join(f"{v:.0f}" for v in values)
-    return out + (f" (1 in {sum(v == 1 for v in values)}/{len(values)})" if len(values) > 1 else "")
+    if not count_ones or len(values) < 2:
+        return out
+    return out + f" (1 in {sum(v == 1 for v in values)}/{len(values)})"
 
 
-def _table1_row(label: str, t: dict[str, Any], paper: tuple[Any, ...]) -> str:
+def _table1_row(label: str, t: dict[str, Any], paper: tuple[Any, ...], route: bool = True
+                ) -> str:
     seeds = t.get("global_seeds") or [t["global"]]
     slopes = t.get("global_values")
     slope = f" [{min(slopes):.2f}-{max(slopes):.2f}]" if slopes else ""
     iso = t.get("isomap_seeds")
     no_cut = t.get("global_no_cut")
-    return (f"| {label} | {_readings(seeds)}{slope} | {'-' if iso is None else _readings(iso)} | "
+    iso_cell = "-" if iso is None else _readings(iso, route)
+    return (f"| {label} | {_readings(seeds, route)}{slope} | {iso_cell} | "
             f"{'-' if no_cut is None else f'{no_cut:.0f}'} | "
             f"{t['local']:.1f} | {t['pointwise']:.1f} | "
             + ("-" if paper[0] == "-" else f"{paper[0]} / {paper[1]} / {paper[2]}") + " |")
@@ -144,7 +149,7 @@ def tables_markdown(report: dict[str, Any]) -> str:
     for cam, t in report["table1"].items():
         lines.append(_table1_row(cam, t, PAPER_TABLE1.get(cam, ("-",) * 3)))
     for cam, t in (report.get("table1_random") or {}).items():
-        lines.append(_table1_row(f"{cam}, random 3-DoF poses", t, ("-",) * 3))
+        lines.append(_table1_row(f"{cam}, random 3-DoF poses", t, ("-",) * 3, route=False))
     rrmse = "RRMSE = sqrt(sum |theta_hat - theta|^2 / sum |theta - mean theta|^2) over (x, y)"
     lines += ["", "## Table 2: localization along the route (position only), " + rrmse, "",
               ("| camera | features | GSE | KNR | kNN | GSE / KNR | GSE median error (m) | "

@@ -58,6 +58,8 @@ def test_quick_run_writes_the_tables_and_figures(quick_run: Path) -> None:
                                                                   t["global_values"]))
                    for t in report[table].values())
     assert "(1 in " in tables
+    random_rows = [row for row in tables.splitlines() if "random 3-DoF poses |" in row]
+    assert len(random_rows) == 3 and not any("(1 in " in row for row in random_rows)
     # the global estimate reads the route as a curve on every subsample (issue 15's Table 1
     # target), and the random 3-DoF views as more (quick run, 400 samples: slopes 1.31-1.40
     # on the route, 2.10-2.84 at random poses; it reads low on small samples)
