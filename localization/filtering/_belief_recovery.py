@@ -4,8 +4,9 @@ belief it replaced (:mod:`~localization.filtering.restart_trial`), and the diver
 monitor's restarts (docs/method.md §13, §13.1).
 
 The host class provides ``ekf``, ``misses``, ``gated``, ``belief_status``, ``monitor``,
-``localizer``, ``motion_model``, ``last_update``, ``_trial``, ``_placed``, ``_forced``, ``_bumped``,
-``_lost_now`` / ``_doubtful_now``, ``_start``, ``_from_image`` and ``_measurement``.
+``localizer``, ``motion_model``, ``last_update``, ``_trial``, ``_refused``, ``_repeat_view``,
+``_placed``, ``_forced``, ``_bumped``, ``_lost_now`` / ``_doubtful_now``, ``_start``,
+``_from_image`` and ``_measurement``.
 """
 
 from __future__ import annotations
@@ -15,8 +16,8 @@ from typing import Any
 import numpy as np
 
 from localization.filtering.ekf import OutOfDomainError, PoseEKF
-from localization.filtering.restart_trial import RestartTrial
-from localization.geometry import Array
+from localization.filtering.restart_trial import RestartTrial, new_view
+from localization.geometry import Array, wrap_angle
 
 __all__ = ["RecoveryMixin"]
 
@@ -36,6 +37,8 @@ class RecoveryMixin:
     motion_model: Any
     last_update: Any
     _trial: RestartTrial | None
+    _refused: tuple[float, float] | None
+    _repeat_view: bool
     _placed: bool
     _forced: bool
     _bumped: int
@@ -51,6 +54,8 @@ class RecoveryMixin:
         right, and one image's psi* may be a look-alike place. Nothing to come back to for a
         belief that was never placed (a start off the maps) or is itself still on trial."""
         prior, misses, keep = self.ekf, self.misses, self._placed and self._trial is None
+        if self._refused is not None:
+            return status  # the view of a refused restart: psi* would say the same again
         if not self._from_image(w):
             return status
         if keep:
@@ -106,7 +111,8 @@ class RecoveryMixin:
         if trial.replaced is not None:
             replaced_ok = self._step_replaced(trial.replaced, motion, w)
             trial.misses = 0 if replaced_ok else trial.misses + 1
-        trial.record(status)
+        self._repeat_view = not trial.record(status, *self._odometry(motion)) and (
+            status == "accepted")
         if not (trial.confirmed or trial.failed):
             return status
         self._trial = None
@@ -115,10 +121,23 @@ class RecoveryMixin:
         if trial.replaced is None:
             return "relocalized" if self._from_image(w) else status
         self.ekf, self.misses, self.gated, self._bumped = trial.replaced, trial.misses, 0, 0
+        self._refused = (0.0, 0.0) if trial.stalled else None
         self.belief_status = "tracking"
         if self.monitor is not None:
             self.monitor.clear()
         return "reverted"
+
+    def _odometry(self, motion: Motion) -> tuple[float, float]:
+        """The travel (m) and turn (rad) of one step's predicted ``motion`` (no update)."""
+        d = np.asarray(self.motion_model.predict(np.zeros(3), motion[0]), dtype=np.float64)
+        return float(np.hypot(d[0], d[1])), float(abs(wrap_angle(d[2])))
+
+    def _track_refused(self, motion: Motion) -> None:
+        """After a trial that failed on repeated views, count the odometry to the next new
+        view; until then no restart (:meth:`_relocalize`) is tried from the same view."""
+        if self._refused is not None:
+            travel, turn = (a + b for a, b in zip(self._refused, self._odometry(motion)))
+            self._refused = None if new_view(travel, turn) else (travel, turn)
 
     def _step_replaced(self, old: PoseEKF, motion: Motion, w: Array) -> bool:
         """Predict with this step's ``motion`` and update the EKF a restart replaced; whether

@@ -207,6 +207,55 @@ def test_a_relocalization_at_a_look_alike_is_undone(localizer, drive):
     assert np.hypot(*(f.x[:2] - poses[end - 1][:2])) < 0.5
 
 
+def test_a_look_alike_seen_again_and_again_does_not_confirm_a_restart(localizer, drive):
+    """The restart's look-alike view, seen again by a robot standing still (zero control),
+    agrees with the restart every time; repeated views are not evidence: the restart is
+    never confirmed, the belief it replaced comes back after TRIAL_REPEATS of them, and no
+    restart is tried again from the same view (stop 34: held-out city 31's stuck robot)."""
+    from localization.filtering.restart_trial import TRIAL_REPEATS
+
+    images, poses, controls = drive
+    W = localizer.transform(images)
+    n = 10
+    f = _tracking(localizer, W, drive, relocalize_after=n)
+    off_map = W[0] + 100.0 * W.std(axis=0)
+    for t in range(START, START + n - 1):
+        f.step(controls[t - 1], off_map)
+    look_alike = W[START + n + 120]
+    assert f.step(controls[START + n - 1], look_alike)[1] == "relocalized"
+    steps = [f.step(np.zeros(2), look_alike) for _ in range(TRIAL_REPEATS + 30)]
+    statuses = [s for _, s in steps]
+    assert statuses.count("accepted") >= 3, statuses  # the old trial's confirmation
+    assert statuses.index("reverted") == TRIAL_REPEATS - 1, statuses
+    assert "relocalized" not in statuses, statuses
+    assert np.hypot(*(f.x[:2] - poses[START + n][:2])) < 1.0
+
+
+def test_a_trial_counts_views_from_somewhere_else_only():
+    from localization.filtering.restart_trial import (
+        CONFIRM_STEPS,
+        TRIAL_REPEATS,
+        VIEW_TRAVEL,
+        VIEW_TURN,
+        RestartTrial,
+    )
+
+    trial = RestartTrial(None, 0)
+    for _ in range(TRIAL_REPEATS - 1):
+        assert not trial.record("accepted", 0.0, 0.0)
+    assert trial.accepted == 0 and not trial.failed
+    assert not trial.record("out_of_domain", VIEW_TRAVEL, 0.0)  # tells nothing, carries on
+    assert trial.record("accepted", 0.0, 0.0)  # the odometry since the last view counts
+    assert not trial.record("accepted", VIEW_TRAVEL / 2, VIEW_TURN / 2)
+    assert trial.record("accepted", VIEW_TRAVEL / 2, VIEW_TURN / 2)
+    assert trial.record("accepted", 0.0, VIEW_TURN)  # a turn on the spot is a new view
+    assert trial.accepted == CONFIRM_STEPS and trial.confirmed and not trial.failed
+    stuck = RestartTrial(None, 0)
+    for _ in range(TRIAL_REPEATS):
+        stuck.record("accepted", 0.0, 0.0)
+    assert stuck.stalled and stuck.failed
+
+
 def test_a_start_off_the_maps_relocalizes_with_nothing_to_come_back_to(localizer, drive):
     """A belief that never had a place (started from the prior: the first image off the
     maps) has nothing to come back to: its relocalization's trial holds no replaced EKF."""
