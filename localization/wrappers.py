@@ -31,6 +31,7 @@ ellipse, the particles and other hypotheses (particle filter), the goal, the pla
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -43,6 +44,7 @@ from localization.districts import DistrictLocalizer
 from localization.filtering.belief import BeliefFilter
 from localization.filtering.ekf import PoseEKF, check_gate_probability
 from localization.filtering.free_space import city_sampler
+from localization.filtering.map_contact import Contact
 from localization.filtering.particles import ParticleBelief
 from localization.filtering.process_noise import world_process_noise
 from localization.geometry import Array, cov_to_triu, wrap_angle
@@ -68,6 +70,13 @@ def _nees(mean: Array, P: Array, pose: ArrayLike) -> float:
     e = np.asarray(pose, dtype=np.float64) - mean
     e[2] = wrap_angle(e[2])
     return float(e @ np.linalg.solve(P, e))
+
+
+def _contact(info: Mapping[str, Any]) -> Contact:
+    """What the robot touched this step: ``info["collision_with"]`` ("city", "traffic"), or
+    ``info["collision"]`` (a contact of unknown kind) from an env that does not say."""
+    kinds = info.get("collision_with")
+    return tuple(kinds) if kinds is not None else bool(info.get("collision", False))
 
 
 class _PoseObservation(RenderBelief, gym.ObservationWrapper):
@@ -164,8 +173,8 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         the images agree, method §13.1, or a dict of DivergenceMonitor settings; default
         False), ``alpha``,
         ``inflate_factor``, ``noise`` ("heteroscedastic": R(x, w), method §15.4),
-        ``free_space`` (the map against which a contact, ``info["collision"]``, can
-        contradict the belief: default ``env.unwrapped.city.free_mask``; None: contacts are
+        ``free_space`` (the map against which a contact with the city,
+        ``info["collision_with"]``, can contradict the belief: default ``env.unwrapped.city.free_mask``; None: contacts are
         ignored); for "particles" ParticleBelief's (``n_particles``, ...,
         ``sample_free``: default poses along the map's streets, from
         ``env.unwrapped.city.street_graph()``; ``seed``: default from ``reset(seed=...)``).
@@ -274,8 +283,7 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
             raise gym.error.ResetNeeded("call reset() before step()")
         obs, reward, terminated, truncated, info = self.env.step(action)
         w = self.localizer.transform(obs["image"])[0]
-        nis, status = self.belief.step(self._control(action), w,
-                                       contact=bool(info.get("collision", False)))
+        nis, status = self.belief.step(self._control(action), w, contact=_contact(info))
         self._publish(info, nis if self.filter == "ekf" else np.nan, status)
         return self.observation(obs), reward, terminated, truncated, info
 

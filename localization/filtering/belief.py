@@ -47,10 +47,12 @@ from localization.filtering.localizer_protocol import Localizer, check_localizer
 from localization.filtering.map_contact import (
     CONTACT_LOST_STEPS,
     CONTACT_MOTIONS,
+    Contact,
     FreeSpace,
     blocked_motion,
     check_free_space,
     contact_contradicts,
+    contact_kinds,
 )
 from localization.filtering.recorded_run import run_recorded
 from localization.filtering.restart_trial import CONFIRM_STEPS, RestartTrial
@@ -163,6 +165,8 @@ class BeliefFilter(RecoveryMixin):
         self._forced = self._lost_now = self._doubtful_now = False
         self._placed = False  # True once the belief came from an image or x0 (not the prior)
         self._trial: RestartTrial | None = None  # a restart on trial
+        self._refused: tuple[float, float] | None = None  # odometry since a stalled trial
+        self._repeat_view = False  # this step's accepted image was a repeat of the trial's
         self.free_space = check_free_space(free_space)
         self._bumped = 0  # steps left "lost" after a contact that contradicts the belief
 
@@ -247,7 +251,7 @@ class BeliefFilter(RecoveryMixin):
             raise ValueError(f"unknown reset mode {mode!r}; choose one of {RESET_MODES}")
         if mode == "global" and x0 is not None:
             raise ValueError("mode='global' starts from an unknown pose: do not pass x0")
-        self.last_update, self._trial = None, None
+        self.last_update, self._trial, self._refused = None, None, None
         self.belief_status = "tracking"
         if x0 is not None:
             self._start(x0, P0 if P0 is not None else np.diag([0.01, 0.01, 0.001]))
@@ -266,12 +270,14 @@ class BeliefFilter(RecoveryMixin):
             return "initial"
         return "out_of_domain"
 
-    def step(self, u: ArrayLike, w: ArrayLike, contact: bool = False) -> tuple[float, str]:
+    def step(self, u: ArrayLike, w: ArrayLike, contact: Contact = False) -> tuple[float, str]:
         """Predict with the commanded control ``u`` (2,), update with the new features ``w``.
 
-        ``contact``: the robot touched something this step (``info["collision"]``): the
-        step is predicted as ``contact_motion`` says; with ``free_space``, a contact where
-        the map has room around the belief makes it "lost" for ``CONTACT_LOST_STEPS`` steps
+        ``contact``: what the robot touched this step (``info["collision_with"]``, e.g.
+        ``("traffic",)``; True for a contact of unknown kind, taken as the city's): the
+        step is predicted as ``contact_motion`` says (a mover may also have pushed and
+        turned the robot); with ``free_space``, a contact with the city where the map has
+        room around the belief makes it "lost" for ``CONTACT_LOST_STEPS`` steps
         (:mod:`~localization.filtering.map_contact`).
 
         Returns
@@ -283,8 +289,11 @@ class BeliefFilter(RecoveryMixin):
         """
         self._check()
         assert self.ekf is not None
-        motion = self._step_motion(u, contact)
+        kinds = contact_kinds(contact)
+        motion = self._step_motion(u, kinds)
         self.ekf.predict(*motion)
+        self._track_refused(motion)
+        self._repeat_view = False
         w = np.asarray(w, dtype=np.float64)
         nis, status = self._update(w)
         self.gated = self.gated + 1 if status == "gated" else 0
@@ -308,19 +317,19 @@ class BeliefFilter(RecoveryMixin):
         elif self.monitor is not None:
             status = self._watch(motion, w, nis, status)
         self._bumped = max(self._bumped - 1, 0)
-        if contact and self.free_space is not None and contact_contradicts(
+        if "city" in kinds and self.free_space is not None and contact_contradicts(
                 self.free_space, self.ekf.x, self.ekf.P):
             self._bumped = CONTACT_LOST_STEPS
         self._update_status(status)
         return nis, status
 
-    def _step_motion(self, u: ArrayLike, contact: bool) -> tuple[Array, Array | None]:
-        """The control ``k U`` of this step and its extra process noise (a contact's,
-        ``contact_motion="blocked"``; None otherwise)."""
+    def _step_motion(self, u: ArrayLike, kinds: frozenset[str]) -> tuple[Array, Array | None]:
+        """The control ``k U`` of this step and its extra process noise (a contact's, of
+        ``kinds``, with ``contact_motion="blocked"``; None otherwise)."""
         u_k = self.gain * np.asarray(u, dtype=np.float64)
-        if contact and self.contact_motion == "blocked":
+        if kinds and self.contact_motion == "blocked":
             assert self.ekf is not None
-            return blocked_motion(self.motion_model, self.ekf.x, u_k)
+            return blocked_motion(self.motion_model, self.ekf.x, u_k, "traffic" in kinds)
         return u_k, None
 
     def _update_status(self, status: str) -> None:
@@ -337,7 +346,7 @@ class BeliefFilter(RecoveryMixin):
             self.belief_status = "doubtful"
             return
         if self.belief_status == "relocalizing":
-            self._confirm += status == "accepted" and not self._forced
+            self._confirm += status == "accepted" and not (self._forced or self._repeat_view)
             if self._confirm >= CONFIRM_STEPS:
                 self.belief_status = "tracking"
             return

@@ -16,19 +16,26 @@ still say "doubtful" (coasting with a narrow P) and steer on into the wall. :cla
 calls the belief "lost" for ``CONTACT_LOST_STEPS`` steps after such a contact (an agent stops
 and looks), then lets it drive on. Numpy only: the map is a callable, e.g.
 ``env.unwrapped.city.free_mask``.
+
+What was touched matters (``info["collision_with"]``, :func:`contact_kinds`): movers are not
+on the map, so only a contact with the city can contradict the belief; a contact with a
+mover instead may have pushed and turned the robot beyond anything commanded
+(:data:`PUSH_SPEED`, :data:`PUSH_TURN_RATE`; before kinds, every contact made a belief in
+the open "lost" for 60 steps, and a robot turned by a vehicle kept its old heading).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any
 
 import numpy as np
 
 from localization.geometry import Array, wrap_angle
 
-__all__ = ["CONTACT_CLEARANCE", "CONTACT_LOST_STEPS", "CONTACT_MOTIONS", "FreeSpace",
-           "blocked_motion", "check_free_space", "contact_contradicts"]
+__all__ = ["CONTACT_CLEARANCE", "CONTACT_KINDS", "CONTACT_LOST_STEPS", "CONTACT_MOTIONS",
+           "PUSH_SPEED", "PUSH_TURN_RATE", "Contact", "FreeSpace", "blocked_motion",
+           "check_free_space", "contact_contradicts", "contact_kinds"]
 
 #: ``free_space(points (n, 2), margin) -> (n,) bool``: whether a disc of radius ``margin`` (m)
 #: around each point is free of buildings (``City.free_mask``)
@@ -43,16 +50,55 @@ CONTACT_CLEARANCE = 0.52
 CONTACT_LOST_STEPS = 60
 #: how :class:`~localization.filtering.belief.BeliefFilter` predicts a contact step
 CONTACT_MOTIONS = ("blocked", "commanded")
+#: what a contact can be with (``info["collision_with"]`` of ``AppearanceNav-v0``): the city
+#: (buildings, the boundary: fixed, on the map) or traffic (moving vehicles, pedestrians)
+CONTACT_KINDS = ("city", "traffic")
+#: m/s a mover may push the robot in a contact step (one standard deviation): the fastest
+#: mover's speed (``envs.traffic.VEHICLE_SPEED``)
+PUSH_SPEED = 1.0
+#: rad/s a mover may turn the robot in a contact step (one standard deviation): set without
+#: tuning, between what a mover's step at the robot's rim could do (PUSH_SPEED / 0.22 m =
+#: 4.5 rad/s) and nothing (the commanded turn alone: on held-out city 31 a vehicle turned a
+#: robot 0.65 rad in 25 contact steps while the belief kept its heading, stop 34)
+PUSH_TURN_RATE = 1.0
+#: a step's contact: False (none), True (something fixed: a contact of unknown kind), or the
+#: kinds touched (``info["collision_with"]``, a collection of ``CONTACT_KINDS``)
+Contact = bool | Collection[str]
 
 
-def blocked_motion(motion_model: Any, x: Array, u: Array) -> tuple[Array, Array]:
+def contact_kinds(contact: object, name: str = "contact") -> frozenset[str]:
+    """The kinds of a step's ``contact`` (:data:`Contact`): True is ``{"city"}`` (a bump into
+    something fixed, what a plain bumper flag meant before kinds), False nothing.
+
+    Raises
+    ------
+    TypeError
+        If ``contact`` (the argument ``name``) is neither a bool nor a collection.
+    ValueError
+        If it holds a kind not in :data:`CONTACT_KINDS`.
+    """
+    if isinstance(contact, (bool, np.bool_)):
+        return frozenset({"city"}) if contact else frozenset()
+    if isinstance(contact, str) or not isinstance(contact, Collection):
+        raise TypeError(f"{name} must be a bool or a collection of {CONTACT_KINDS} "
+                         f"(info['collision_with']), got {contact!r}")
+    bad = [k for k in contact if k not in CONTACT_KINDS]
+    if bad:
+        raise ValueError(f"{name}: unknown contact kinds {bad}; choose from {CONTACT_KINDS}")
+    return frozenset(contact)
+
+
+def blocked_motion(motion_model: Any, x: Array, u: Array, pushed: bool = False
+                   ) -> tuple[Array, Array]:
     """The control of a contact step and the covariance added to its prediction.
 
     The robot is taken as blocked: ``u_blocked = [0, w]`` (no translation, the commanded
     turn). What the commanded control would have added, the translation
     ``d = |F(x, u) - F(x, u_blocked)|`` and the turn ``a = |w| dt``, becomes one standard
     deviation: ``Q_contact = diag(d^2, d^2, a^2)`` (isotropic in x, y: a push can go
-    sideways).
+    sideways). A contact with a mover (``pushed``) may also have moved the robot by the
+    mover's step and turned it: ``Q_contact += diag(s^2, s^2, b^2)`` with
+    ``s = PUSH_SPEED dt``, ``b = PUSH_TURN_RATE dt`` (``dt`` of ``motion_model``).
 
     Returns
     -------
@@ -64,7 +110,11 @@ def blocked_motion(motion_model: Any, x: Array, u: Array) -> tuple[Array, Array]
     moved, stayed = motion_model.predict(x, u), motion_model.predict(x, u_blocked)
     d = float(np.hypot(*(moved[:2] - stayed[:2])))
     a = float(abs(wrap_angle(stayed[2] - x[2])))
-    return u_blocked, np.diag([d * d, d * d, a * a])
+    Q = np.diag([d * d, d * d, a * a])
+    if pushed:
+        dt = float(motion_model.dt)
+        Q += np.diag([(PUSH_SPEED * dt) ** 2] * 2 + [(PUSH_TURN_RATE * dt) ** 2])
+    return u_blocked, Q
 
 
 def check_free_space(free_space: object) -> FreeSpace | None:

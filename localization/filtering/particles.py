@@ -38,7 +38,12 @@ from localization._validation import check_choice, check_int, check_real
 from localization.filtering._modes import Mode, find_modes
 from localization.filtering.augmented_mcl import LikelihoodAverages
 from localization.filtering.district_particles import check_measurement_noise, image_models
-from localization.filtering.map_contact import CONTACT_MOTIONS, blocked_motion
+from localization.filtering.map_contact import (
+    CONTACT_MOTIONS,
+    Contact,
+    blocked_motion,
+    contact_kinds,
+)
 from localization.filtering.measurement_noise import inflate
 from localization.filtering.mode_confirmation import ModeConfirmation
 from localization.filtering.mode_tracker import make_tracker
@@ -315,16 +320,18 @@ class ParticleBelief:
         self._fresh = np.zeros(self.n_particles, dtype=bool)
         return self.status
 
-    def predict(self, u: ArrayLike, contact: bool = False) -> None:
+    def predict(self, u: ArrayLike, contact: Contact = False) -> None:
         """Move every particle: ``X_i = F(X_i, k U) + T(yaw_i) e_i``, ``e_i ~ N(0, Q)``; a
-        ``contact`` step as ``contact_motion`` says."""
+        ``contact`` step (what was touched: ``info["collision_with"]``, or True) as
+        ``contact_motion`` says."""
         self._check()
         u = np.asarray(u, dtype=np.float64)
         if u.shape != (2,) or not np.all(np.isfinite(u)):
             raise ValueError(f"u (control) must be a finite (2,) [v, w], got {u!r}")
-        u_k, Q_contact = self.gain * u, None
-        if contact and self.contact_motion == "blocked":
-            u_k, Q_contact = blocked_motion(self.motion_model, self.particles[0], u_k)
+        u_k, Q_contact, kinds = self.gain * u, None, contact_kinds(contact)
+        if kinds and self.contact_motion == "blocked":
+            u_k, Q_contact = blocked_motion(self.motion_model, self.particles[0], u_k,
+                                            "traffic" in kinds)
         self.particles = move_particles(self.motion_model, self.particles, u_k, self.Q,
                                         self.rng, self._unicycle, Q_contact)
 
@@ -337,10 +344,10 @@ class ParticleBelief:
         z = self.likelihood.measure(w) if z is None else z
         return self.likelihood.distances(z, self.particles if X is None else X)
 
-    def step(self, u: ArrayLike, w: ArrayLike, contact: bool = False) -> tuple[float, str]:
+    def step(self, u: ArrayLike, w: ArrayLike, contact: Contact = False) -> tuple[float, str]:
         """Predict with the commanded control ``u`` (2,), weight with the features ``w``,
-        inject and resample. ``contact``: the robot touched something this step
-        (``info["collision"]``; see ``contact_motion``).
+        inject and resample. ``contact``: what the robot touched this step
+        (``info["collision_with"]``, or True; see ``contact_motion``).
 
         Returns
         -------
@@ -351,7 +358,7 @@ class ParticleBelief:
         self._check()
         w = self._check_w(w)
         self.predict(u, contact)
-        contact = bool(contact) and self.contact_motion == "blocked"
+        contact = bool(contact_kinds(contact)) and self.contact_motion == "blocked"
         self.injected = 0
         z = self.likelihood.measure(w)
         if not np.all(np.isfinite(z)):

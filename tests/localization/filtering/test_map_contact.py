@@ -8,9 +8,12 @@ import pytest
 from localization.filtering.map_contact import (
     CONTACT_CLEARANCE,
     CONTACT_LOST_STEPS,
+    PUSH_SPEED,
+    PUSH_TURN_RATE,
     blocked_motion,
     check_free_space,
     contact_contradicts,
+    contact_kinds,
 )
 
 X = np.array([1.0, 2.0, 0.3])
@@ -102,6 +105,41 @@ def test_blocked_motion_keeps_the_turn_and_makes_the_step_its_uncertainty() -> N
     assert d == pytest.approx(0.08, rel=0.01)
 
 
+def test_a_push_by_a_mover_widens_the_step_by_the_mover_s_step() -> None:
+    from envs.motion_model import UnicycleModel
+
+    model = UnicycleModel(0.1)
+    u, Q = blocked_motion(model, X, np.array([0.8, 0.5]))
+    u_pushed, Q_pushed = blocked_motion(model, X, np.array([0.8, 0.5]), pushed=True)
+    np.testing.assert_array_equal(u_pushed, u)
+    np.testing.assert_allclose(Q_pushed - Q, np.diag([(PUSH_SPEED * 0.1) ** 2] * 2
+                                                     + [(PUSH_TURN_RATE * 0.1) ** 2]))
+
+
+def test_contact_kinds_read_the_env_s_collision_with() -> None:
+    assert contact_kinds(True) == {"city"} and contact_kinds(np.bool_(False)) == frozenset()
+    assert contact_kinds(("city", "traffic")) == {"city", "traffic"}
+    assert contact_kinds(()) == frozenset()
+    with pytest.raises(ValueError, match="contact: unknown contact kinds \\['wall'\\]"):
+        contact_kinds(("wall",))
+    with pytest.raises(TypeError, match="contact must be a bool or a collection"):
+        contact_kinds("traffic")
+
+
+def test_a_contact_with_traffic_does_not_contradict_the_map(localizer, drive):
+    """Movers are not on the map: a bump into one where the map has room leaves the belief
+    tracking (a bump into the city there makes it "lost", above), with the mover's push
+    in P."""
+    f, W, controls = _tracking(localizer, drive, Map(True))
+    g, _, _ = _tracking(localizer, drive, Map(True))
+    f.step(controls[59], W[60], contact=("traffic",))
+    g.step(controls[59], W[60], contact=True)
+    assert f.belief_status == "tracking" and g.belief_status == "lost"
+    assert f.ekf.P_prior[2, 2] > g.ekf.P_prior[2, 2] + 0.5 * (PUSH_TURN_RATE * 0.1) ** 2
+    with pytest.raises(ValueError, match="unknown contact kinds"):
+        f.step(controls[60], W[61], contact=("bus",))
+
+
 def test_a_blocked_contact_step_predicts_no_translation(localizer, drive):
     """The default: a contact step is predicted as blocked, whatever the map says."""
     import copy
@@ -141,4 +179,5 @@ def test_the_wrapper_passes_the_bumper_to_the_belief(localizer) -> None:
         if info["collision"] or terminated or truncated:
             break
     env.close()
-    assert info["collision"] and info["belief_status"] == "lost"
+    assert info["collision"] and info["collision_with"] == ("city",)
+    assert info["belief_status"] == "lost"
