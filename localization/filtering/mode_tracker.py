@@ -43,6 +43,7 @@ from numpy.typing import ArrayLike
 from localization._validation import check_int, check_real
 from localization.filtering._modes import Mode
 from localization.filtering.belief import BeliefFilter
+from localization.filtering.map_contact import Contact
 from localization.geometry import Array, wrap_angle
 
 __all__ = ["TRACKER_SOURCES", "ModeTracker", "make_tracker"]
@@ -149,9 +150,9 @@ class ModeTracker:
         return float(weights[d2 < self.radius ** 2].sum())
 
     def step(self, u: ArrayLike, w: ArrayLike, particles: Array, weights: Array,
-             dominant: Mode, contact: bool = False) -> str:
-        """Step the EKF with the control ``u`` (2,) and features ``w`` (m,) (``contact``: a
-        contact step, predicted as blocked), then choose the report from the particles
+             dominant: Mode, contact: Contact = False) -> str:
+        """Step the EKF with the control ``u`` (2,) and features ``w`` (m,) (``contact``: what
+        a contact step touched, predicted as blocked), then choose the report from the particles
         (N, 3), their weights (N,) and dominant mode.
 
         Returns

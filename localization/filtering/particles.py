@@ -358,7 +358,7 @@ class ParticleBelief:
         self._check()
         w = self._check_w(w)
         self.predict(u, contact)
-        contact = bool(contact_kinds(contact)) and self.contact_motion == "blocked"
+        contact = contact_kinds(contact) if self.contact_motion == "blocked" else frozenset()
         self.injected = 0
         z = self.likelihood.measure(w)
         if not np.all(np.isfinite(z)):
@@ -392,9 +392,9 @@ class ParticleBelief:
         """How many particles to inject at this share: Binomial(N, share)."""
         return int(self.rng.binomial(self.n_particles, share)) if share > 0 else 0
 
-    def _track(self, u: ArrayLike, w: Array, contact: bool) -> None:
-        """Step the mode tracker (``contact``: a blocked contact step); a report most
-        particles disagree with is "doubtful"."""
+    def _track(self, u: ArrayLike, w: Array, contact: frozenset[str]) -> None:
+        """Step the mode tracker (``contact``: what a blocked contact step touched); a
+        report most particles disagree with is "doubtful"."""
         if self.tracker is None:
             return
         source = self.tracker.step(u, w, self.particles, self.weights, self.modes[0], contact)
