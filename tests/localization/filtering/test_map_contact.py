@@ -181,3 +181,12 @@ def test_the_wrapper_passes_the_bumper_to_the_belief(localizer) -> None:
     env.close()
     assert info["collision"] and info["collision_with"] == ("city",)
     assert info["belief_status"] == "lost"
+
+
+def test_the_wrapper_reads_what_was_touched_or_falls_back_to_the_bumper() -> None:
+    from localization.wrappers import _contact
+
+    assert _contact({"collision": True, "collision_with": ("traffic",)}) == ("traffic",)
+    assert _contact({"collision": False, "collision_with": ()}) == ()
+    assert _contact({"collision": True}) is True  # an env that does not say what
+    assert _contact({}) is False
