@@ -57,8 +57,8 @@ CONTACT_KINDS = ("city", "traffic")
 #: mover's speed (``envs.traffic.VEHICLE_SPEED``)
 PUSH_SPEED = 1.0
 #: rad/s a mover may turn the robot in a contact step (one standard deviation): what the
-#: fastest mover's step at the robot's rim can turn it, PUSH_SPEED / 0.22 m (4.5 rad/s; a
-#: vehicle turned a robot 2.1 rad in 0.5 s on held-out city 22, stop 35). Two such steps make
+#: fastest mover's step at the robot's rim can turn it, PUSH_SPEED / 0.22 m (4.5 rad/s; on
+#: held-out city 22 a vehicle's push turned a robot 2.2 rad in 0.7 s, stop 35). Two such steps make
 #: the heading too uncertain to steer on ("lost"), until the images narrow it again.
 #: Tuning cities 13-14, the scripted agent on the EKF belief among traffic, 200 episodes:
 #: 1 rad/s 0.995 success, 2.54 contact steps per episode; 4.5 rad/s 0.99, 1.49
