@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from localization.filtering.ekf import OutOfDomainError, PoseEKF
-from localization.filtering.restart_trial import RestartTrial, new_view
+from localization.filtering.restart_trial import RestartTrial, ViewOdometer
 from localization.geometry import Array, wrap_angle
 
 __all__ = ["RecoveryMixin"]
@@ -37,7 +37,7 @@ class RecoveryMixin:
     motion_model: Any
     last_update: Any
     _trial: RestartTrial | None
-    _refused: tuple[float, float] | None
+    _refused: ViewOdometer | None
     _repeat_view: bool
     _placed: bool
     _forced: bool
@@ -121,7 +121,7 @@ class RecoveryMixin:
         if trial.replaced is None:
             return "relocalized" if self._from_image(w) else status
         self.ekf, self.misses, self.gated, self._bumped = trial.replaced, trial.misses, 0, 0
-        self._refused = (0.0, 0.0) if trial.stalled else None
+        self._refused = ViewOdometer() if trial.stalled else None
         self.belief_status = "tracking"
         if self.monitor is not None:
             self.monitor.clear()
@@ -136,8 +136,9 @@ class RecoveryMixin:
         """After a trial that failed on repeated views, count the odometry to the next new
         view; until then no restart (:meth:`_relocalize`) is tried from the same view."""
         if self._refused is not None:
-            travel, turn = (a + b for a, b in zip(self._refused, self._odometry(motion)))
-            self._refused = None if new_view(travel, turn) else (travel, turn)
+            self._refused.add(*self._odometry(motion))
+            if self._refused.new_view:
+                self._refused = None
 
     def _step_replaced(self, old: PoseEKF, motion: Motion, w: Array) -> bool:
         """Predict with this step's ``motion`` and update the EKF a restart replaced; whether

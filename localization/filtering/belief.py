@@ -55,7 +55,7 @@ from localization.filtering.map_contact import (
     contact_kinds,
 )
 from localization.filtering.recorded_run import run_recorded
-from localization.filtering.restart_trial import CONFIRM_STEPS, RestartTrial
+from localization.filtering.restart_trial import CONFIRM_STEPS, RestartTrial, ViewOdometer
 from localization.geometry import Array
 
 STATUSES = ("initial", "accepted", "gated", "out_of_domain", "relocalized", "reverted")
@@ -165,7 +165,7 @@ class BeliefFilter(RecoveryMixin):
         self._forced = self._lost_now = self._doubtful_now = False
         self._placed = False  # True once the belief came from an image or x0 (not the prior)
         self._trial: RestartTrial | None = None  # a restart on trial
-        self._refused: tuple[float, float] | None = None  # odometry since a stalled trial
+        self._refused: ViewOdometer | None = None  # odometry since a stalled trial
         self._repeat_view = False  # this step's accepted image was a repeat of the trial's
         self.free_space = check_free_space(free_space)
         self._bumped = 0  # steps left "lost" after a contact that contradicts the belief

@@ -21,12 +21,12 @@ its look turns); after ``TRIAL_REPEATS`` repeats the trial fails.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from localization.filtering.ekf import PoseEKF
 
 __all__ = ["CONFIRM_STEPS", "TRIAL_REPEATS", "TRIAL_STEPS", "VIEW_TRAVEL", "VIEW_TURN",
-           "RestartTrial", "new_view"]
+           "RestartTrial", "ViewOdometer"]
 
 CONFIRM_STEPS = 3  # accepted measurements after a restart before the status is "tracking"
 TRIAL_STEPS = 5  # a restart must have CONFIRM_STEPS accepted within these, or fails
@@ -35,10 +35,22 @@ VIEW_TURN = 0.03  # rad of odometry between two counted views
 TRIAL_REPEATS = 15  # measured steps from the same view after which a trial fails
 
 
-def new_view(travel: float, turn: float) -> bool:
-    """Whether odometry of ``travel`` m and ``turn`` rad since the last counted view makes
-    the next image a view from somewhere else (:data:`VIEW_TRAVEL`, :data:`VIEW_TURN`)."""
-    return travel >= VIEW_TRAVEL or turn >= VIEW_TURN
+@dataclass
+class ViewOdometer:
+    """Odometry (m, rad) since the last counted view: the next image is a view from
+    somewhere else once it reaches :data:`VIEW_TRAVEL` or :data:`VIEW_TURN`."""
+
+    travel: float = 0.0
+    turn: float = 0.0
+
+    def add(self, travel: float, turn: float) -> None:
+        """Add one step's predicted travel (m) and turn (rad)."""
+        self.travel += travel
+        self.turn += turn
+
+    @property
+    def new_view(self) -> bool:
+        return self.travel >= VIEW_TRAVEL or self.turn >= VIEW_TURN
 
 
 @dataclass
@@ -55,8 +67,8 @@ class RestartTrial:
         The restart's measured steps from new views, and its accepted ones.
     repeats : int
         Its measured steps from the view last counted (not in ``steps``).
-    travel, turn : float
-        Odometry (m, rad) since the last counted view (since the restart before the first).
+    odometer : ViewOdometer
+        Odometry since the last counted view (since the restart before the first).
     """
 
     replaced: PoseEKF | None
@@ -64,21 +76,19 @@ class RestartTrial:
     steps: int = 0
     accepted: int = 0
     repeats: int = 0
-    travel: float = 0.0
-    turn: float = 0.0
+    odometer: ViewOdometer = field(default_factory=ViewOdometer)
 
-    def record(self, status: str, travel: float = VIEW_TRAVEL, turn: float = 0.0) -> bool:
+    def record(self, status: str, travel: float, turn: float) -> bool:
         """Count one step of the restarted EKF with measurement status ``status`` after
         odometry of ``travel`` m and ``turn`` rad; whether it counted as a new view (False
         for an image off the maps and for a repeat)."""
-        self.travel += travel
-        self.turn += turn
+        self.odometer.add(travel, turn)
         if status == "out_of_domain":
             return False
-        if not new_view(self.travel, self.turn):
+        if not self.odometer.new_view:
             self.repeats += 1
             return False
-        self.travel = self.turn = 0.0
+        self.odometer = ViewOdometer()
         self.steps += 1
         self.accepted += status == "accepted"
         return True
