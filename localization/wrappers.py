@@ -174,8 +174,8 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         False), ``alpha``,
         ``inflate_factor``, ``noise`` ("heteroscedastic": R(x, w), method §15.4),
         ``free_space`` (the map against which a contact with the city,
-        ``info["collision_with"]``, can contradict the belief: default ``env.unwrapped.city.free_mask``; None: contacts are
-        ignored); for "particles" ParticleBelief's (``n_particles``, ...,
+        ``info["collision_with"]``, can contradict the belief: default
+        ``env.unwrapped.city.free_mask``; None: contacts are ignored); for "particles" ParticleBelief's (``n_particles``, ...,
         ``sample_free``: default poses along the map's streets, from
         ``env.unwrapped.city.street_graph()``; ``seed``: default from ``reset(seed=...)``).
 

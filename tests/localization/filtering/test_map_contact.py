@@ -116,6 +116,15 @@ def test_a_push_by_a_mover_widens_the_step_by_the_mover_s_step() -> None:
                                                      + [(PUSH_TURN_RATE * 0.1) ** 2]))
 
 
+def test_the_push_constants_are_the_env_s_movers_and_robot() -> None:
+    """The filter does not import the env; its push model must stay in step with it."""
+    from envs.robot import ROBOT_RADIUS
+    from envs.traffic import PEDESTRIAN_SPEED, VEHICLE_SPEED
+
+    assert PUSH_SPEED == max(*VEHICLE_SPEED, *PEDESTRIAN_SPEED)
+    assert PUSH_TURN_RATE == pytest.approx(PUSH_SPEED / ROBOT_RADIUS)
+
+
 def test_contact_kinds_read_the_env_s_collision_with() -> None:
     assert contact_kinds(True) == {"city"} and contact_kinds(np.bool_(False)) == frozenset()
     assert contact_kinds(("city", "traffic")) == {"city", "traffic"}
