@@ -349,8 +349,15 @@ def _rows(args: RobustnessConfig, names: dict[str, list[str]]) -> list[tuple[str
             if runs_condition(s, c)]
 
 
-def _fit_all(args: RobustnessConfig, cities: list[int], conditions: list[str]) -> float:
-    trainings = sorted({training_of(c) for c in conditions})
+def trainings_used(rows: list[tuple[str, str, str]]) -> list[str]:
+    """The localizers (:func:`training_of`) the (agent, source, condition) rows use: the true
+    pose needs none, dead reckoning a localizer's process noise."""
+    return sorted({training_of(c) for _, s, c in rows if s != "oracle"})
+
+
+def _fit_all(args: RobustnessConfig, cities: list[int], rows: list[tuple[str, str, str]]
+             ) -> float:
+    trainings = trainings_used(rows)
     fits = [FitTask(args, city, t) for city in cities for t in trainings
             if not (args.reuse_localizers and localizer_path(args, city, t).exists())]
     seconds = map_tasks(run_fit_task, fits, workers=args.workers, ray_address=args.ray_address,
@@ -375,8 +382,8 @@ def run_robustness_bench(args: RobustnessConfig) -> dict[str, Any]:
     names = args.lists()
     cities = [int(c) for c in names["cities"]]
     t0 = time.perf_counter()
-    fit_seconds = _fit_all(args, cities, names["conditions"])
     rows = _rows(args, names)
+    fit_seconds = _fit_all(args, cities, rows)
     seeds = tuple(range(args.seed, args.seed + args.episodes))
     chunk = max(1, -(-len(seeds) // 2))  # two tasks per row and city: both workers stay busy
     tasks = [RobustTask(args, city, c, s, a, seeds[i:i + chunk]) for a, s, c in rows

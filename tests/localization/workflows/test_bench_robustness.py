@@ -18,6 +18,7 @@ from localization.workflows.benchmarks.robustness import (
     run_robustness_bench,
     runs_condition,
     training_of,
+    trainings_used,
 )
 from localization.workflows.benchmarks.robustness_report import (
     DEFAULT_STEPS,
@@ -33,6 +34,12 @@ def test_image_free_sources_skip_lighting_presets_only() -> None:
     assert not runs_condition("oracle", "night") and not runs_condition("dead_reckoning", "dusk")
     assert runs_condition("oracle", "traffic") and runs_condition("dead_reckoning", "kidnap")
     assert training_of("kidnap") == "daylight" and training_of("traffic") == "randomised"
+
+
+def test_rows_on_the_true_pose_alone_fit_no_localizer() -> None:
+    assert trainings_used([("scripted", "oracle", "traffic"), ("ppo", "oracle", "nominal")]) == []
+    assert trainings_used([("scripted", "dead_reckoning", "kidnap"),
+                           ("scripted", "ekf", "traffic")]) == ["daylight", "randomised"]
 
 
 def test_each_localizer_gets_its_own_features() -> None:
