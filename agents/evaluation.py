@@ -48,6 +48,8 @@ class Episode:
     belief_rmse : float — RMS distance (m) between the belief mean and the true position.
     traffic_collision_steps : int — of ``collision_steps``, those that touched a moving object
         (``"traffic"`` in ``info["collision_with"]``): hazards an agent may not be able to avoid.
+    tipped_over : bool — the robot was on its side or back at some step
+        (``info["tipped_over"]``: a moving object flipped it; it then drives blind).
     """
 
     seed: int
@@ -60,6 +62,7 @@ class Episode:
     final_distance: float
     belief_rmse: float
     traffic_collision_steps: int = 0
+    tipped_over: bool = False
 
     @property
     def path_ratio(self) -> float:
@@ -127,7 +130,7 @@ def run_episode(env: gym.Env, agent: Any, seed: int, planner: StreetPlanner | No
     reads_info = "info" in inspect.signature(agent.act).parameters  # e.g. belief_status
     start = info["pose"].copy()
     shortest = max(path_length(planner.plan(start[:2], base.goal)) - base.GOAL_RADIUS, 0.0)
-    travelled, collisions, traffic, sq_err, steps = 0.0, 0, 0, [], 0
+    travelled, collisions, traffic, sq_err, steps, tipped = 0.0, 0, 0, [], 0, False
     terminated = truncated = False
     prev = start[:2]
     while not (terminated or truncated) and (max_steps is None or steps < max_steps):
@@ -139,6 +142,7 @@ def run_episode(env: gym.Env, agent: Any, seed: int, planner: StreetPlanner | No
         prev = pose[:2]
         collisions += bool(info["collision"])
         traffic += "traffic" in info.get("collision_with", ())
+        tipped = tipped or bool(info.get("tipped_over", False))
         sq_err.append(float(np.sum((np.asarray(obs["pose_mean"][:2], float) - pose[:2]) ** 2))
                       if "pose_mean" in obs else np.nan)
         steps += 1
@@ -146,7 +150,7 @@ def run_episode(env: gym.Env, agent: Any, seed: int, planner: StreetPlanner | No
                    path_length=travelled, shortest=shortest, collision_steps=collisions,
                    final_distance=float(info["distance_to_goal"]),
                    belief_rmse=float(np.sqrt(np.mean(sq_err))) if sq_err else np.nan,
-                   traffic_collision_steps=traffic)
+                   traffic_collision_steps=traffic, tipped_over=tipped)
 
 
 def run_episodes(env: gym.Env, agent: Any, seeds: Iterable[int], progress: bool = True,
@@ -170,7 +174,8 @@ def summarize(episodes: Sequence[Episode]) -> dict[str, float]:
     dict with ``episodes``; ``success_rate`` (binomial standard error); ``spl`` (see
     :func:`spl`); ``collisions_per_episode`` (steps in contact; ``traffic_collisions_per_episode``
     those with a moving object); ``collision_episodes``
-    (share of episodes with any contact); ``time_to_goal`` (simulated s) and ``path_ratio``
+    (share of episodes with any contact); ``tipped_over_episodes`` (share of episodes in
+    which the robot was flipped over); ``time_to_goal`` (simulated s) and ``path_ratio``
     (travelled / shortest), over successes; ``belief_rmse`` (m, over every step of every
     episode, its standard error by the delta method from the episodes' mean squared errors).
     """
@@ -186,6 +191,7 @@ def summarize(episodes: Sequence[Episode]) -> dict[str, float]:
                          ("traffic_collisions_per_episode",
                           [e.traffic_collision_steps for e in episodes]),
                          ("collision_episodes", [e.collision_steps > 0 for e in episodes]),
+                         ("tipped_over_episodes", [e.tipped_over for e in episodes]),
                          ("time_to_goal", [e.time for e in ok]),
                          ("path_ratio", [e.path_ratio for e in ok])):
         out[name], out[f"{name}_se"] = mean_and_se(values)

@@ -28,6 +28,7 @@ from envs.robot import (
     ROBOT_RADIUS,
     ROBOT_XML,
     SENSOR_XML,
+    TIPPED_OVER_TILT,
     WHEEL_RADIUS,
 )
 from envs.scene import City, generate_city
@@ -108,7 +109,9 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
     ``collision`` (the robot touched a building, the city's invisible boundary wall or a
     moving object during the step), ``collision_with`` (what it touched: a tuple of
     ``"city"`` (buildings and the boundary) and ``"traffic"`` (vehicles and pedestrians),
-    empty without contact), ``distance_to_goal`` (m), ``control`` (the clipped U applied); with
+    empty without contact), ``tipped_over`` (the robot lies on its side or back, tilted more
+than ``envs.robot.TIPPED_OVER_TILT``: a shove by a moving object can flip it, and it cannot
+right itself), ``distance_to_goal`` (m), ``control`` (the clipped U applied); with
     ``city_layout="lookalike"`` also ``twins`` (m, 3): the true pose's twin poses in the city
     (:meth:`envs.lookalike.LookalikeCity.twins`); ``conditions`` (dict): the episode's
     conditions (:meth:`envs.conditions.Conditions.to_info`; ``holds`` lists those that
@@ -287,6 +290,12 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         return np.array([x, y, math.pi if yaw == -math.pi else yaw])
 
     @property
+    def tilt(self) -> float:
+        """Angle (rad) between the robot's up axis and the vertical: 0 upright, pi on its back."""
+        _, qx, qy, _ = self.data.qpos[self._root_qpos + 3 : self._root_qpos + 7].tolist()
+        return math.acos(min(max(1.0 - 2.0 * (qx * qx + qy * qy), -1.0), 1.0))
+
+    @property
     def goal(self) -> NDArray[np.float64]:
         """The goal position [x, y], float64 (2,)."""
         return self._goal.copy()
@@ -372,6 +381,7 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
             "pose": pose,
             "collision": bool(collided_with),
             "collision_with": collided_with,
+            "tipped_over": self.tilt > TIPPED_OVER_TILT,
             "distance_to_goal": math.hypot(pose[0] - self._goal[0], pose[1] - self._goal[1]),
             "control": np.asarray(control, dtype=np.float64),
             "conditions": dict(self._conditions.info),

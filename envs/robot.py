@@ -19,6 +19,11 @@ CAMERA_FOVY = 75.0  # degrees
 MAX_WHEEL_SPEED = 40.0  # rad/s, actuator ctrlrange
 WHEEL_KV = 0.3  # N m s, velocity-servo gain
 MAX_WHEEL_TORQUE = 0.6  # N m
+#: rad of tilt (the body's up axis from the vertical) beyond which the robot is on its side or
+#: back: a moving object that shoves it against a wall can flip it (tuning cities 13-16, reset
+#: seed 3000080 of the robustness benchmark's traffic rows, in every one of the four), and it
+#: then drives blind, its wheels in the air or turning the wrong way
+TIPPED_OVER_TILT = 1.0
 
 ROBOT_XML = f"""
     <body name="robot" pos="0 0 {WHEEL_RADIUS}">

@@ -9,10 +9,11 @@ from agents.evaluation import Episode, mean_and_se, metric_cells, spl, summarize
 
 
 def _episode(success: bool, shortest: float, travelled: float, collisions: int = 0,
-             steps: int = 100, rmse: float = 0.1, traffic: int = 0) -> Episode:
+             steps: int = 100, rmse: float = 0.1, traffic: int = 0,
+             tipped: bool = False) -> Episode:
     return Episode(seed=0, success=success, steps=steps, time=steps * 0.1, path_length=travelled,
                    shortest=shortest, collision_steps=collisions, final_distance=0.0,
-                   belief_rmse=rmse, traffic_collision_steps=traffic)
+                   belief_rmse=rmse, traffic_collision_steps=traffic, tipped_over=tipped)
 
 
 def test_spl_hand_computed() -> None:
@@ -46,8 +47,9 @@ def test_summarize_reports_metrics_with_standard_errors() -> None:
     runs = [_episode(True, 10.0, 12.5, collisions=2, steps=100, rmse=0.3),
             _episode(True, 10.0, 10.0, steps=200, rmse=0.4),
             _episode(True, 4.0, 8.0, steps=300, rmse=0.0),
-            _episode(False, 10.0, 3.0, collisions=4, steps=400, rmse=1.2, traffic=3)]
+            _episode(False, 10.0, 3.0, collisions=4, steps=400, rmse=1.2, traffic=3, tipped=True)]
     s = summarize(runs)
+    assert s["tipped_over_episodes"] == 0.25
     assert s["success_rate"] == 0.75
     assert s["success_rate_se"] == pytest.approx(np.sqrt(0.75 * 0.25 / 4))
     assert s["spl"] == pytest.approx((0.8 + 1.0 + 0.5 + 0.0) / 4)

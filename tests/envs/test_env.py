@@ -148,6 +148,18 @@ def test_collision_and_reward():
     e.close()
 
 
+def test_a_robot_on_its_back_is_reported_tipped_over():
+    e = AppearanceNavEnv(scene_seed=0)
+    e.reset(seed=0, options={"pose": START, "goal": GOAL})
+    infos = [e.step([1.0, 0.5])[4] for _ in range(10)]
+    assert not any(i["tipped_over"] for i in infos) and e.tilt < 0.5  # driving keeps it upright
+    a = e._root_qpos  # flip it on its back, as a vehicle's shove did (envs.robot.TIPPED_OVER_TILT)
+    e.data.qpos[a + 2: a + 7] = [0.15, 0.0, 1.0, 0.0, 0.0]
+    infos = [e.step([1.0, 0.0])[4] for _ in range(5)]
+    assert all(i["tipped_over"] for i in infos) and e.tilt > 2.5
+    e.close()
+
+
 @pytest.mark.parametrize(
     "action, match",
     [([np.nan, 0.0], "NaN"), ([0.0, np.inf], "NaN or inf"), ([0.0], r"shape \(2,\)"), (np.zeros((2, 1)), r"shape \(2,\)")],

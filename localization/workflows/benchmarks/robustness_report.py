@@ -124,6 +124,16 @@ def metrics_table(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def tipped_over_note(result: dict[str, Any]) -> str:
+    """A line naming the rows in which a moving object flipped the robot over (empty if
+    none): those episodes are failures of the env's physics, not of the agent."""
+    cells = [f"{key.replace('/', ' / ')}: {row['tipped_over_episodes'] * row['episodes']:.0f} of "
+             f"{row['episodes']}" for key, row in result["summary"].items()
+             if row.get("tipped_over_episodes", 0.0) > 0]
+    return ("\n\nEpisodes in which the robot was flipped on its side or back (it then drives "
+            "blind): " + "; ".join(cells) + ".") if cells else ""
+
+
 def held_out_label(cities: str) -> str:
     """How the report names the cities: held out, or a tuning run on others."""
     held = set(HELD_OUT_CITIES.split(","))
@@ -153,5 +163,6 @@ def markdown(result: dict[str, Any]) -> str:
     rows = "\n".join(f"| {t['target']} | {t['value']} | {t['limit']} | "
                      f"{'PASS' if t['pass'] else 'MISS'} |" for t in result["targets"])
     return (head + "## Success\n\n" + success_matrix(result) + "\n\n## Every metric (± standard "
-            "error)\n\n" + metrics_table(result) + "\n\n## Targets\n\n| target | value | limit "
-            "| status |\n|---|---:|---|---|\n" + rows + "\n")
+            "error)\n\n" + metrics_table(result) + tipped_over_note(result)
+            + "\n\n## Targets\n\n| target | value | limit | status |\n|---|---:|---|---|\n"
+            + rows + "\n")
