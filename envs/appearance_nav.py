@@ -27,7 +27,6 @@ from envs.robot import (
     ROBOT_GEOMS,
     ROBOT_RADIUS,
     ROBOT_XML,
-    ROOT_JOINTS,
     SENSOR_XML,
     TIPPED_OVER_TILT,
     WHEEL_RADIUS,
@@ -111,7 +110,8 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
     moving object during the step), ``collision_with`` (what it touched: a tuple of
     ``"city"`` (buildings and the boundary) and ``"traffic"`` (vehicles and pedestrians),
     empty without contact), ``tipped_over`` (the robot lies on its side or back, tilted more
-than ``envs.robot.TIPPED_OVER_TILT``; its roll and pitch limits keep it from happening), ``distance_to_goal`` (m), ``control`` (the clipped U applied); with
+than ``envs.robot.TIPPED_OVER_TILT``: a shove by a moving object can flip it, and it cannot
+right itself), ``distance_to_goal`` (m), ``control`` (the clipped U applied); with
     ``city_layout="lookalike"`` also ``twins`` (m, 3): the true pose's twin poses in the city
     (:meth:`envs.lookalike.LookalikeCity.twins`); ``conditions`` (dict): the episode's
     conditions (:meth:`envs.conditions.Conditions.to_info`; ``holds`` lists those that
@@ -202,9 +202,8 @@ than ``envs.robot.TIPPED_OVER_TILT``; its roll and pitch limits keep it from hap
 
     def _init_ids(self) -> None:
         m = self.model
-        root = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, ROOT_JOINTS[0])
+        root = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "root")
         self._root_qpos, self._root_dof = m.jnt_qposadr[root], m.jnt_dofadr[root]
-        self._robot_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "robot")
         self._goal_mocap = m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "goal")]
         sensor = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, "collision")
         self._collision_adr = m.sensor_adr[sensor]
@@ -284,17 +283,17 @@ than ``envs.robot.TIPPED_OVER_TILT``; its roll and pitch limits keep it from hap
     # ------------------------------------------------------------------ pose
     @property
     def pose(self) -> NDArray[np.float64]:
-        """The true pose ``[x, y, yaw]`` of the robot's root joints (its heading hinge wrapped to
-        (-pi, pi]), float64 (3,)."""
-        x, y, _, turned = self.data.qpos[self._root_qpos : self._root_qpos + 4].tolist()
-        yaw = math.atan2(math.sin(turned), math.cos(turned))
+        """The true pose ``[x, y, yaw]`` of the robot's free joint, float64 (3,)."""
+        x, y, _, qw, qx, qy, qz = self.data.qpos[self._root_qpos : self._root_qpos + 7].tolist()
+        # heading of the body x axis projected on the ground; atan2 is already in [-pi, pi]
+        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
         return np.array([x, y, math.pi if yaw == -math.pi else yaw])
 
     @property
     def tilt(self) -> float:
         """Angle (rad) between the robot's up axis and the vertical: 0 upright, pi on its back."""
-        up = float(self.data.xmat[self._robot_body, 8])  # the body z axis's vertical component
-        return math.acos(min(max(up, -1.0), 1.0))
+        _, qx, qy, _ = self.data.qpos[self._root_qpos + 3 : self._root_qpos + 7].tolist()
+        return math.acos(min(max(1.0 - 2.0 * (qx * qx + qy * qy), -1.0), 1.0))
 
     @property
     def goal(self) -> NDArray[np.float64]:
@@ -308,7 +307,7 @@ than ``envs.robot.TIPPED_OVER_TILT``; its roll and pitch limits keep it from hap
         """
         x, y, yaw = check_array(pose, "pose", shape=(3,), what="[x, y, yaw]")
         a = self._root_qpos
-        self.data.qpos[a : a + 6] = [x, y, 0.0, yaw, 0.0, 0.0]
+        self.data.qpos[a : a + 7] = [x, y, WHEEL_RADIUS, np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]
         self.data.qvel[:] = 0.0
         self.data.ctrl[:] = 0.0
         mujoco.mj_forward(self.model, self.data)
@@ -327,7 +326,7 @@ than ``envs.robot.TIPPED_OVER_TILT``; its roll and pitch limits keep it from hap
             return image
         v = self.data.qvel[self._root_dof : self._root_dof + 2]
         return self._conditions.camera_image(image, math.hypot(v[0], v[1]),
-                                             float(self.data.qvel[self._root_dof + 3]))
+                                             float(self.data.qvel[self._root_dof + 5]))
 
     # ------------------------------------------------------------------ conditions
     @property

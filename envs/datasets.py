@@ -48,7 +48,7 @@ from envs.driving import bearing, pursuit_turn_rate
 from envs.lanes import lane_poses, street_tour
 from envs.motion_model import wrap_angle
 from envs.off_lane import OffLanePilot, off_lane_waypoints
-from envs.robot import HALF_TRACK, ROBOT_RADIUS, ROOT_JOINTS, WHEEL_RADIUS
+from envs.robot import HALF_TRACK, ROBOT_RADIUS, WHEEL_RADIUS
 from localization._validation import (
     check_bool,
     check_choice,
@@ -170,8 +170,9 @@ def _drive_in(base: Any, pose: NDArray[np.float64], v: float, w: float, steps: i
     if placed is not None:
         placed()
     m, d = base.model, base.data
-    root = m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, ROOT_JOINTS[0])]
-    d.qvel[root:root + 4] = [v * np.cos(yaw0), v * np.sin(yaw0), 0.0, w]
+    root = m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "root")]
+    d.qvel[root:root + 3] = [v * np.cos(yaw0), v * np.sin(yaw0), 0.0]
+    d.qvel[root + 5] = w
     for name, side in (("left", -1.0), ("right", 1.0)):
         dof = m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)]
         d.qvel[dof] = (v + side * w * HALF_TRACK) / WHEEL_RADIUS

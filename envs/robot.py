@@ -2,11 +2,7 @@
 
 Two hinge-jointed driven wheels (velocity actuators) and a frictionless caster
 sphere under a box chassis (plus a front caster 1 cm off the ground that stops
-the robot tipping forward when braking). Its root joints (:data:`ROOT_JOINTS`) slide along
-x, y and z and turn it about z, and let it roll and pitch within ``MAX_TILT`` only: on a free
-joint a vehicle's shove could flip it on its back (tuning cities 13-16, reset seed 3000080 of
-the robustness benchmark's traffic rows, in all four), and it then drove blind, its wheels
-turning it the wrong way, for the rest of the episode. The camera ``"ego"`` sits on a
+the robot tipping forward when braking), on a free joint. The camera ``"ego"`` sits on a
 mast above the front axle, looking along the robot's heading (+x of the body):
 MuJoCo cameras look along their local -z with y up, hence ``xyaxes="0 -1 0 0 0 1"``.
 The robot's geoms are in geom group 3, which cameras do not draw by default: the
@@ -23,20 +19,15 @@ CAMERA_FOVY = 75.0  # degrees
 MAX_WHEEL_SPEED = 40.0  # rad/s, actuator ctrlrange
 WHEEL_KV = 0.3  # N m s, velocity-servo gain
 MAX_WHEEL_TORQUE = 0.6  # N m
-MAX_TILT = 0.5  # rad (29 degrees), the roll and pitch limits
 #: rad of tilt (the body's up axis from the vertical) beyond which the robot is on its side or
-#: back (``info["tipped_over"]``): the roll and pitch limits keep it below, a guard in case
-#: they are ever loosened
+#: back: a moving object that shoves it against a wall can flip it (tuning cities 13-16, reset
+#: seed 3000080 of the robustness benchmark's traffic rows, in every one of the four), and it
+#: then drives blind, its wheels in the air or turning the wrong way
 TIPPED_OVER_TILT = 1.0
 
 ROBOT_XML = f"""
     <body name="robot" pos="0 0 {WHEEL_RADIUS}">
-      <joint name="root_x" type="slide" axis="1 0 0"/>
-      <joint name="root_y" type="slide" axis="0 1 0"/>
-      <joint name="root_z" type="slide" axis="0 0 1"/>
-      <joint name="root_yaw" type="hinge" axis="0 0 1"/>
-      <joint name="root_roll" type="hinge" axis="1 0 0" limited="true" range="{-MAX_TILT} {MAX_TILT}"/>
-      <joint name="root_pitch" type="hinge" axis="0 1 0" limited="true" range="{-MAX_TILT} {MAX_TILT}"/>
+      <freejoint name="root"/>
       <geom name="chassis" type="box" pos="-0.03 0 0.03" size="0.16 0.1 0.04" rgba="0.9 0.9 0.9 1"
             mass="2.0" contype="2" conaffinity="2" group="3"/>
       <geom name="mast" type="cylinder" pos="0.08 0 0.18" size="0.015 0.12" rgba="0.2 0.2 0.2 1"
@@ -69,10 +60,6 @@ ACTUATOR_XML = f"""
     <velocity name="right" joint="right" kv="{WHEEL_KV}" ctrlrange="{-MAX_WHEEL_SPEED} {MAX_WHEEL_SPEED}"
               forcerange="{-MAX_WHEEL_TORQUE} {MAX_WHEEL_TORQUE}"/>
 """
-
-#: the robot's root joints, in qpos order: slides along x, y, z (from the rest height
-#: WHEEL_RADIUS), the heading hinge about z, then roll and pitch within +-MAX_TILT
-ROOT_JOINTS = ("root_x", "root_y", "root_z", "root_yaw", "root_roll", "root_pitch")
 
 ROBOT_GEOMS = ("chassis", "caster", "caster_front", "wheel_left", "wheel_right")
 
