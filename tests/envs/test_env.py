@@ -3,6 +3,7 @@
 import warnings
 
 import gymnasium as gym
+import mujoco
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
@@ -148,16 +149,46 @@ def test_collision_and_reward():
     e.close()
 
 
-def test_a_robot_on_its_back_is_reported_tipped_over():
-    e = AppearanceNavEnv(scene_seed=0)
-    e.reset(seed=0, options={"pose": START, "goal": GOAL})
-    infos = [e.step([1.0, 0.5])[4] for _ in range(10)]
-    assert not any(i["tipped_over"] for i in infos) and e.tilt < 0.5  # driving keeps it upright
-    a = e._root_qpos  # flip it on its back, as a vehicle's shove did (envs.robot.TIPPED_OVER_TILT)
-    e.data.qpos[a + 2: a + 7] = [0.15, 0.0, 1.0, 0.0, 0.0]
-    infos = [e.step([1.0, 0.0])[4] for _ in range(5)]
-    assert all(i["tipped_over"] for i in infos) and e.tilt > 2.5
+def test_a_shove_by_a_vehicle_cannot_flip_the_robot():
+    """Without the upright torque this shove (a waiting vehicle driving on into a robot that
+    turns into it) flipped the robot on its back (envs.robot.upright_torque)."""
+    from envs.robot import ROBOT_RADIUS, TIPPED_OVER_TILT, UPRIGHT_TILT
+    from envs.traffic import VEHICLE_HALF
+
+    e = gym.make("AppearanceNav-v0", image_size=(16, 16),
+                 conditions={"preset": "traffic", "vehicles": 1, "pedestrians": 0})
+    base = e.unwrapped
+    e.reset(seed=2)
+    x, y, yaw = base.traffic.active_poses()[0]
+    ahead, side = VEHICLE_HALF[0] + ROBOT_RADIUS + 0.2, 0.15
+    base.set_pose([x + ahead * np.cos(yaw) - side * np.sin(yaw),
+                   y + ahead * np.sin(yaw) + side * np.cos(yaw), yaw + np.pi + np.pi / 4])
+    infos, tilts = [], []
+    for t in range(80):
+        infos.append(e.step([0.0, 0.0] if t < 26 else [0.9, 1.0])[4])
+        tilts.append(base.tilt)
+    assert any(i["collision_with"] == ("traffic",) for i in infos)  # it was shoved
+    assert max(tilts) > UPRIGHT_TILT  # ... hard: the torque had work to do
+    assert not any(i["tipped_over"] for i in infos) and max(tilts) < TIPPED_OVER_TILT
+    a = base._root_qpos  # a robot on its back is reported
+    base.data.qpos[a + 3: a + 7] = [0.0, 1.0, 0.0, 0.0]
+    mujoco.mj_forward(base.model, base.data)
+    assert base.tilt == pytest.approx(np.pi) and base._info((), np.zeros(2))["tipped_over"]
     e.close()
+
+
+def test_upright_torque_acts_only_past_the_upright_tilt():
+    from envs.robot import UPRIGHT_TILT, upright_torque
+
+    def tilted(angle):  # rolled about the body x axis
+        c, s = np.cos(angle), np.sin(angle)
+        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]]).ravel()
+
+    np.testing.assert_array_equal(upright_torque(tilted(UPRIGHT_TILT - 0.01), np.ones(3)), 0.0)
+    tau = upright_torque(tilted(UPRIGHT_TILT + 0.2), np.zeros(3))
+    assert tau[0] < 0 and tau[1] == 0 and tau[2] == 0  # rolled +x: rights it about -x
+    damped = upright_torque(tilted(UPRIGHT_TILT + 0.2), np.array([1.0, 0.0, 5.0]))
+    assert damped[0] < tau[0] and damped[2] == 0  # damps the roll, never the heading's turn
 
 
 @pytest.mark.parametrize(
