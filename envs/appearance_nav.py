@@ -113,7 +113,7 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
     moving object during the step), ``collision_with`` (what it touched: a tuple of
     ``"city"`` (buildings and the boundary) and ``"traffic"`` (vehicles and pedestrians),
     empty without contact), ``tipped_over`` (the robot lies on its side or back, tilted more
-than ``envs.robot.TIPPED_OVER_TILT``; its upright torque keeps that from happening),
+than ``envs.robot.TIPPED_OVER_TILT``; its upright torque rights it),
 ``distance_to_goal`` (m), ``control`` (the clipped U applied); with
     ``city_layout="lookalike"`` also ``twins`` (m, 3): the true pose's twin poses in the city
     (:meth:`envs.lookalike.LookalikeCity.twins`); ``conditions`` (dict): the episode's

@@ -3,7 +3,7 @@
 Two hinge-jointed driven wheels (velocity actuators) and a frictionless caster
 sphere under a box chassis (plus a front caster 1 cm off the ground that stops
 the robot tipping forward when braking), on a free joint. Past ``UPRIGHT_TILT`` a
-restoring torque (:func:`upright_torque`) holds it up: a vehicle's shove once flipped it on
+restoring torque (:func:`upright_torque`) rights it: a vehicle's shove once flipped it on
 its back (tuning cities 13-16, reset seed 3000080 of the robustness benchmark's traffic rows,
 in all four), and it then drove blind, its wheels turning it the wrong way. Below that tilt
 (all of normal driving) the physics is untouched. The camera ``"ego"`` sits on a
@@ -27,7 +27,8 @@ MAX_WHEEL_SPEED = 40.0  # rad/s, actuator ctrlrange
 WHEEL_KV = 0.3  # N m s, velocity-servo gain
 MAX_WHEEL_TORQUE = 0.6  # N m
 #: rad of tilt (the body's up axis from the vertical) beyond which the robot is on its side or
-#: back (``info["tipped_over"]``); the upright torque keeps it below
+#: back (``info["tipped_over"]``); the upright torque rights it (held-out cities 21-22, 400
+#: traffic episodes: one tilted past it for a moment, righted, and reached its goal)
 TIPPED_OVER_TILT = 1.0
 #: rad of tilt from which the upright torque acts (normal driving stays far below: ~0.15 rad)
 UPRIGHT_TILT = 0.5
