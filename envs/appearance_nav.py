@@ -28,13 +28,11 @@ from envs.robot import (
     ROBOT_RADIUS,
     ROBOT_XML,
     SENSOR_XML,
-    TIPPED_OVER_TILT,
-    UPRIGHT_TILT,
     WHEEL_RADIUS,
-    upright_torque,
 )
 from envs.scene import City, generate_city
 from envs.top_down import TopDownMap, top_down_map
+from envs.upright import TIPPED_OVER_TILT, Upright
 from localization._validation import (
     check_array,
     check_choice,
@@ -48,7 +46,6 @@ __all__ = ["CITY_LAYOUTS", "RESET_OPTIONS", "AppearanceNavEnv", "make_appearance
 
 #: the values of ``city_layout``
 CITY_LAYOUTS = ("random", "lookalike")
-_COS_UPRIGHT = math.cos(UPRIGHT_TILT)  # the robot's up axis z component at the upright tilt
 
 #: the keys ``reset(options=...)`` understands
 RESET_OPTIONS = ("pose", "goal")
@@ -112,9 +109,9 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
     ``collision`` (the robot touched a building, the city's invisible boundary wall or a
     moving object during the step), ``collision_with`` (what it touched: a tuple of
     ``"city"`` (buildings and the boundary) and ``"traffic"`` (vehicles and pedestrians),
-    empty without contact), ``tipped_over`` (the robot lies on its side or back, tilted more
-than ``envs.robot.TIPPED_OVER_TILT``; its upright torque rights it),
-``distance_to_goal`` (m), ``control`` (the clipped U applied); with
+    empty without contact), ``tipped_over`` (tilted past ``envs.upright.TIPPED_OVER_TILT``, on
+    its side or back; the upright torque rights it), ``distance_to_goal`` (m), ``control``
+    (the clipped U applied); with
     ``city_layout="lookalike"`` also ``twins`` (m, 3): the true pose's twin poses in the city
     (:meth:`envs.lookalike.LookalikeCity.twins`); ``conditions`` (dict): the episode's
     conditions (:meth:`envs.conditions.Conditions.to_info`; ``holds`` lists those that
@@ -207,8 +204,7 @@ than ``envs.robot.TIPPED_OVER_TILT``; its upright torque rights it),
         m = self.model
         root = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "root")
         self._root_qpos, self._root_dof = m.jnt_qposadr[root], m.jnt_dofadr[root]
-        self._robot_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "robot")
-        self._righting = False  # the upright torque is on
+        self._upright = Upright(m)
         self._goal_mocap = m.body_mocapid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "goal")]
         sensor = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, "collision")
         self._collision_adr = m.sensor_adr[sensor]
@@ -255,7 +251,7 @@ than ``envs.robot.TIPPED_OVER_TILT``; its upright torque rights it),
             self._conditions.advance(self.data, self.dt, self.pose[:2])
         city_hit = traffic_hit = False
         for _ in range(self.frame_skip):  # the contact sensor sees the state at the start of each substep
-            self._keep_upright()
+            self._upright.apply(self.data)
             mujoco.mj_step(self.model, self.data)
             city_hit = city_hit or bool(self.data.sensordata[self._collision_adr] > 0)
             traffic_hit = traffic_hit or self._conditions.hit(self.data)
@@ -295,21 +291,10 @@ than ``envs.robot.TIPPED_OVER_TILT``; its upright torque rights it),
         yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
         return np.array([x, y, math.pi if yaw == -math.pi else yaw])
 
-    def _keep_upright(self) -> None:
-        """The upright torque of the current tilt (``envs.robot.upright_torque``); a cheap
-        check of the tilt alone while upright (every substep of normal driving)."""
-        d, b = self.data, self._robot_body
-        if d.xmat[b, 8] > _COS_UPRIGHT and not self._righting:
-            return
-        d.xfrc_applied[b, 3:] = upright_torque(
-            d.xmat[b], d.qvel[self._root_dof + 3 : self._root_dof + 6])
-        self._righting = bool(d.xmat[b, 8] <= _COS_UPRIGHT)
-
     @property
     def tilt(self) -> float:
         """Angle (rad) between the robot's up axis and the vertical: 0 upright, pi on its back."""
-        _, qx, qy, _ = self.data.qpos[self._root_qpos + 3 : self._root_qpos + 7].tolist()
-        return math.acos(min(max(1.0 - 2.0 * (qx * qx + qy * qy), -1.0), 1.0))
+        return self._upright.tilt(self.data)
 
     @property
     def goal(self) -> NDArray[np.float64]:

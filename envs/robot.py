@@ -2,11 +2,8 @@
 
 Two hinge-jointed driven wheels (velocity actuators) and a frictionless caster
 sphere under a box chassis (plus a front caster 1 cm off the ground that stops
-the robot tipping forward when braking), on a free joint. Past ``UPRIGHT_TILT`` a
-restoring torque (:func:`upright_torque`) rights it: a vehicle's shove once flipped it on
-its back (tuning cities 13-16, reset seed 3000080 of the robustness benchmark's traffic rows,
-in all four), and it then drove blind, its wheels turning it the wrong way. Below that tilt
-(all of normal driving) the physics is untouched. The camera ``"ego"`` sits on a
+the robot tipping forward when braking), on a free joint (kept on its wheels by
+:mod:`envs.upright`). The camera ``"ego"`` sits on a
 mast above the front axle, looking along the robot's heading (+x of the body):
 MuJoCo cameras look along their local -z with y up, hence ``xyaxes="0 -1 0 0 0 1"``.
 The robot's geoms are in geom group 3, which cameras do not draw by default: the
@@ -14,9 +11,6 @@ robot never sees itself and costs no draw calls.
 """
 
 from __future__ import annotations
-
-import numpy as np
-from numpy.typing import NDArray
 
 WHEEL_RADIUS = 0.05  # m
 HALF_TRACK = 0.13  # m, wheel centre to robot centre along the axle
@@ -26,14 +20,6 @@ CAMERA_FOVY = 75.0  # degrees
 MAX_WHEEL_SPEED = 40.0  # rad/s, actuator ctrlrange
 WHEEL_KV = 0.3  # N m s, velocity-servo gain
 MAX_WHEEL_TORQUE = 0.6  # N m
-#: rad of tilt (the body's up axis from the vertical) beyond which the robot is on its side or
-#: back (``info["tipped_over"]``); the upright torque rights it (held-out cities 21-22, 400
-#: traffic episodes: one tilted past it for a moment, righted, and reached its goal)
-TIPPED_OVER_TILT = 1.0
-#: rad of tilt from which the upright torque acts (normal driving stays far below: ~0.15 rad)
-UPRIGHT_TILT = 0.5
-#: N m per rad of tilt past UPRIGHT_TILT, and N m s per rad/s of roll and pitch rate
-UPRIGHT_STIFFNESS, UPRIGHT_DAMPING = 20.0, 1.0
 
 ROBOT_XML = f"""
     <body name="robot" pos="0 0 {WHEEL_RADIUS}">
@@ -78,25 +64,3 @@ SENSOR_XML = """
     <contact name="collision" subtree1="robot" body2="city" num="1" data="found"/>
 """
 
-
-def upright_torque(xmat: NDArray[np.float64], w_body: NDArray[np.float64]) -> NDArray[np.float64]:
-    """World torque (3,) that holds the robot up once tilted past :data:`UPRIGHT_TILT`: a spring
-    ``UPRIGHT_STIFFNESS (tilt - UPRIGHT_TILT)`` about the axis that rights it, damped by
-    ``UPRIGHT_DAMPING`` on the roll and pitch rate; zero below that tilt.
-
-    Parameters
-    ----------
-    xmat : (9,) the body's rotation matrix (``data.xmat``), row-major.
-    w_body : (3,) its angular velocity in the body frame (the free joint's ``qvel[3:6]``).
-    """
-    R = np.asarray(xmat, dtype=np.float64).reshape(3, 3)
-    up = R[:, 2]
-    tilt = float(np.arccos(np.clip(up[2], -1.0, 1.0)))
-    if tilt <= UPRIGHT_TILT:
-        return np.zeros(3)
-    axis = np.array([up[1], -up[0], 0.0])  # up x z: turning about it brings up to z
-    norm = float(np.linalg.norm(axis))
-    axis = axis / norm if norm > 1e-9 else np.array([1.0, 0.0, 0.0])  # upside down: any axis
-    w = R @ np.asarray(w_body, dtype=np.float64)
-    w[2] = 0.0  # the heading's turn is the wheels' business
-    return UPRIGHT_STIFFNESS * (tilt - UPRIGHT_TILT) * axis - UPRIGHT_DAMPING * w

@@ -171,13 +171,13 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         More settings of the filter (``FILTER_OPTIONS[filter]``): for "ekf"
         ``detect_divergence`` (True: the EKF notices when it is lost and restarts where
         the images agree, method §13.1, or a dict of DivergenceMonitor settings; default
-        False), ``alpha``,
-        ``inflate_factor``, ``noise`` ("heteroscedastic": R(x, w), method §15.4),
-        ``free_space`` (the map against which a contact with the city,
+        False), ``alpha``, ``inflate_factor``, ``noise`` ("heteroscedastic": R(x, w),
+        method §15.4), ``free_space`` (the map against which a contact with the city,
         ``info["collision_with"]``, can contradict the belief: default
-        ``env.unwrapped.city.free_mask``; None: contacts are ignored); for "particles" ParticleBelief's (``n_particles``, ...,
-        ``sample_free``: default poses along the map's streets, from
-        ``env.unwrapped.city.street_graph()``; ``seed``: default from ``reset(seed=...)``).
+        ``env.unwrapped.city.free_mask``; None: contacts are ignored); for "particles"
+        ParticleBelief's (``n_particles``, ..., ``sample_free``: default poses along the
+        map's streets, from ``env.unwrapped.city.street_graph()``; ``seed``: default from
+        ``reset(seed=...)``).
 
     Notes
     -----

@@ -151,8 +151,9 @@ def test_collision_and_reward():
 
 def test_a_shove_by_a_vehicle_cannot_flip_the_robot():
     """Without the upright torque this shove (a waiting vehicle driving on into a robot that
-    turns into it) flipped the robot on its back (envs.robot.upright_torque)."""
-    from envs.robot import ROBOT_RADIUS, TIPPED_OVER_TILT, UPRIGHT_TILT
+    turns into it) flipped the robot on its back (envs.upright)."""
+    from envs.robot import ROBOT_RADIUS
+    from envs.upright import TIPPED_OVER_TILT, UPRIGHT_TILT
     from envs.traffic import VEHICLE_HALF
 
     e = gym.make("AppearanceNav-v0", image_size=(16, 16),
@@ -178,7 +179,7 @@ def test_a_shove_by_a_vehicle_cannot_flip_the_robot():
 
 
 def test_upright_torque_acts_only_past_the_upright_tilt():
-    from envs.robot import UPRIGHT_TILT, upright_torque
+    from envs.upright import UPRIGHT_TILT, upright_torque
 
     def tilted(angle):  # rolled about the body x axis
         c, s = np.cos(angle), np.sin(angle)

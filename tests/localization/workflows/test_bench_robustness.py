@@ -26,6 +26,7 @@ from localization.workflows.benchmarks.robustness_report import (
     _success_cell,
     held_out_label,
     targets,
+    tipped_over_note,
 )
 
 
@@ -86,6 +87,15 @@ def test_an_unknown_randomised_map_is_named() -> None:
     args = Args(only="robustness", robustness=RobustnessConfig(randomised_map="dusk"))
     with pytest.raises(UsageError, match="--robustness-randomised-map"):
         check(args)
+
+
+def test_the_report_names_rows_where_the_robot_was_flipped() -> None:
+    upright = {"episodes": 200, "tipped_over_episodes": 0.0}
+    assert tipped_over_note({"summary": {"scripted/ekf/traffic": upright}}) == ""
+    flipped = {"episodes": 200, "tipped_over_episodes": 0.005}
+    note = tipped_over_note({"summary": {"scripted/oracle/traffic": flipped,
+                                         "scripted/ekf/traffic": upright}})
+    assert "scripted / oracle / traffic: 1 of 200" in note and "ekf" not in note
 
 
 def test_targets_from_rows() -> None:
