@@ -29,6 +29,7 @@ from envs.robot import (
     ROBOT_XML,
     SENSOR_XML,
     WHEEL_RADIUS,
+    contact_bearing,
 )
 from envs.scene import City, generate_city
 from envs.top_down import TopDownMap, top_down_map
@@ -109,7 +110,9 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
     ``collision`` (the robot touched a building, the city's invisible boundary wall or a
     moving object during the step), ``collision_with`` (what it touched: a tuple of
     ``"city"`` (buildings and the boundary) and ``"traffic"`` (vehicles and pedestrians),
-    empty without contact), ``tipped_over`` (tilted past ``envs.upright.TIPPED_OVER_TILT``, on
+    empty without contact), ``collision_bearing`` (rad, counter-clockwise from the heading:
+    where the robot touched the city first in the step, 0 ahead, +-pi behind, what a ring
+    bumper reports; NaN without a city contact), ``tipped_over`` (tilted past ``envs.upright.TIPPED_OVER_TILT``, on
     its side or back; the upright torque rights it), ``distance_to_goal`` (m), ``control``
     (the clipped U applied); with
     ``city_layout="lookalike"`` also ``twins`` (m, 3): the true pose's twin poses in the city
@@ -241,7 +244,9 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         self.set_pose(pose)
         self._steps = 0
         self._distance = self._distance_to_goal()
-        return self._obs(), self._info((), control=np.zeros(2))
+        info = self._info((), control=np.zeros(2))
+        info["collision_bearing"] = math.nan
+        return self._obs(), info
 
     def step(self, action: ArrayLike) -> tuple[Obs, float, bool, bool, dict[str, Any]]:
         """Apply ``U = [v, w]`` for ``dt`` seconds (see the class notes for clipping and errors)."""
@@ -249,12 +254,14 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         self.data.ctrl[:] = self._wheel_speeds(u)
         if self._conditions.traffic is not None:
             self._conditions.advance(self.data, self.dt, self.pose[:2])
-        city_hit = traffic_hit = False
+        traffic_hit, bearing = False, math.nan
         for _ in range(self.frame_skip):  # the contact sensor sees the state at the start of each substep
             self._upright.apply(self.data)
             mujoco.mj_step(self.model, self.data)
-            city_hit = city_hit or bool(self.data.sensordata[self._collision_adr] > 0)
+            if math.isnan(bearing) and self.data.sensordata[self._collision_adr] > 0:
+                bearing = contact_bearing(self.data.sensordata[self._collision_adr:], self.pose)
             traffic_hit = traffic_hit or self._conditions.hit(self.data)
+        city_hit = not math.isnan(bearing)
         collision = city_hit or traffic_hit
         self._sync_kinematics()
         self._steps += 1
@@ -265,8 +272,9 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         terminated = distance < self.GOAL_RADIUS
         truncated = self.max_episode_steps is not None and self._steps >= self.max_episode_steps
         with_ = ("city",) * city_hit + ("traffic",) * traffic_hit
-        return (self._obs(), float(reward), bool(terminated), bool(truncated),
-                self._info(with_, u, pose))
+        info = self._info(with_, u, pose)
+        info["collision_bearing"] = bearing
+        return self._obs(), float(reward), bool(terminated), bool(truncated), info
 
     def render(self) -> NDArray[np.uint8] | None:
         """Return a top-down view (north up) of the city, robot and goal, or None without a render mode."""

@@ -12,6 +12,9 @@ robot never sees itself and costs no draw calls.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
+
 WHEEL_RADIUS = 0.05  # m
 HALF_TRACK = 0.13  # m, wheel centre to robot centre along the axle
 ROBOT_RADIUS = 0.22  # m, a disc covering the robot footprint
@@ -59,8 +62,20 @@ ACTUATOR_XML = f"""
 
 ROBOT_GEOMS = ("chassis", "caster", "caster_front", "wheel_left", "wheel_right")
 
-# 1 while any robot geom touches a geom of the static body "city" (buildings, boundary walls)
+# while any robot geom touches a geom of the static body "city" (buildings, boundary walls):
+# the number of contacts, then the centroid (world, m) of their net force, a bump sensor's
+# reading of where it was hit (:func:`contact_bearing`)
 SENSOR_XML = """
-    <contact name="collision" subtree1="robot" body2="city" num="1" data="found"/>
+    <contact name="collision" subtree1="robot" body2="city" num="1" data="found pos"
+             reduce="netforce"/>
 """
+
+
+def contact_bearing(sensor: Sequence[float], pose: Sequence[float]) -> float:
+    """The bearing (rad, in [-pi, pi], counter-clockwise from the robot's heading) of the
+    point where the robot touches the city, from the ``collision`` sensor's reading
+    ``[found, x, y, z]`` (the contacts' net-force centroid) and the robot's ``pose``
+    ``[x, y, yaw]``: 0 a bump ahead, +-pi one behind (what a ring bumper reports)."""
+    angle = math.atan2(sensor[2] - pose[1], sensor[1] - pose[0]) - pose[2]
+    return math.remainder(angle, math.tau)
 

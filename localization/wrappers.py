@@ -173,7 +173,8 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         the images agree, method §13.1, or a dict of DivergenceMonitor settings; default
         False), ``alpha``, ``inflate_factor``, ``noise`` ("heteroscedastic": R(x, w),
         method §15.4), ``free_space`` (the map against which a contact with the city,
-        ``info["collision_with"]``, can contradict the belief: default
+        ``info["collision_with"]``, can contradict the belief, at the side
+        ``info["collision_bearing"]`` says it was touched: default
         ``env.unwrapped.city.free_mask``; None: contacts are ignored); for "particles"
         ParticleBelief's (``n_particles``, ..., ``sample_free``: default poses along the
         map's streets, from ``env.unwrapped.city.street_graph()``; ``seed``: default from
@@ -283,7 +284,11 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
             raise gym.error.ResetNeeded("call reset() before step()")
         obs, reward, terminated, truncated, info = self.env.step(action)
         w = self.localizer.transform(obs["image"])[0]
-        nis, status = self.belief.step(self._control(action), w, contact=_contact(info))
+        if isinstance(self.belief, BeliefFilter):  # where the bumper was hit, too
+            nis, status = self.belief.step(self._control(action), w, contact=_contact(info),
+                                           bearing=info.get("collision_bearing"))
+        else:
+            nis, status = self.belief.step(self._control(action), w, contact=_contact(info))
         self._publish(info, nis if self.filter == "ekf" else np.nan, status)
         return self.observation(obs), reward, terminated, truncated, info
 

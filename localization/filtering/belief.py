@@ -50,6 +50,7 @@ from localization.filtering.map_contact import (
     Contact,
     FreeSpace,
     blocked_motion,
+    check_bearing,
     check_free_space,
     contact_contradicts,
     contact_kinds,
@@ -270,7 +271,8 @@ class BeliefFilter(RecoveryMixin):
             return "initial"
         return "out_of_domain"
 
-    def step(self, u: ArrayLike, w: ArrayLike, contact: Contact = False) -> tuple[float, str]:
+    def step(self, u: ArrayLike, w: ArrayLike, contact: Contact = False,
+             bearing: float | None = None) -> tuple[float, str]:
         """Predict with the commanded control ``u`` (2,), update with the new features ``w``.
 
         ``contact``: what the robot touched this step (``info["collision_with"]``, e.g.
@@ -278,7 +280,9 @@ class BeliefFilter(RecoveryMixin):
         step is predicted as ``contact_motion`` says (a mover may also have pushed and
         turned the robot); with ``free_space``, a contact with the city where the map has
         room around the belief makes it "lost" for ``CONTACT_LOST_STEPS`` steps
-        (:mod:`~localization.filtering.map_contact`).
+        (:mod:`~localization.filtering.map_contact`); ``bearing`` (rad from the heading,
+        ``info["collision_bearing"]``; None or NaN: unknown) says where the robot was
+        touched, so that only the map at that side of the belief explains the contact.
 
         Returns
         -------
@@ -289,7 +293,7 @@ class BeliefFilter(RecoveryMixin):
         """
         self._check()
         assert self.ekf is not None
-        kinds = contact_kinds(contact)
+        kinds, bearing = contact_kinds(contact), check_bearing(bearing)
         motion = self._step_motion(u, kinds)
         self.ekf.predict(*motion)
         self._track_refused(motion)
@@ -318,7 +322,7 @@ class BeliefFilter(RecoveryMixin):
             status = self._watch(motion, w, nis, status)
         self._bumped = max(self._bumped - 1, 0)
         if "city" in kinds and self.free_space is not None and contact_contradicts(
-                self.free_space, self.ekf.x, self.ekf.P):
+                self.free_space, self.ekf.x, self.ekf.P, bearing):
             self._bumped = CONTACT_LOST_STEPS
         self._update_status(status)
         return nis, status

@@ -33,16 +33,27 @@ import numpy as np
 
 from localization.geometry import Array, wrap_angle
 
-__all__ = ["CONTACT_CLEARANCE", "CONTACT_KINDS", "CONTACT_LOST_STEPS", "CONTACT_MOTIONS",
-           "PUSH_SPEED", "PUSH_TURN_RATE", "Contact", "FreeSpace", "blocked_motion",
-           "check_free_space", "contact_contradicts", "contact_kinds"]
+__all__ = ["CONTACT_CLEARANCE", "CONTACT_GRID", "CONTACT_KINDS", "CONTACT_LOST_STEPS",
+           "CONTACT_MOTIONS", "CONTACT_SLACK", "PUSH_SPEED", "PUSH_TURN_RATE", "ROBOT_RADIUS", "Contact",
+           "FreeSpace", "blocked_motion", "check_bearing", "check_free_space", "contact_contradicts",
+           "contact_kinds", "contact_points"]
 
 #: ``free_space(points (n, 2), margin) -> (n,) bool``: whether a disc of radius ``margin`` (m)
 #: around each point is free of buildings (``City.free_mask``)
 FreeSpace = Callable[[Array, float], Array]
+#: m, the robot's radius: a disc covering its footprint, within which it is touched
+#: (``envs.robot.ROBOT_RADIUS``, kept equal by a test: this module does not import the env)
+ROBOT_RADIUS = 0.22
 #: m of free space around the belief's mean (plus two position standard deviations) in which
-#: a contact contradicts it: the robot's radius (0.22 m) and 0.3 m of slack
-CONTACT_CLEARANCE = 0.52
+#: a contact contradicts it: the robot's radius (:data:`ROBOT_RADIUS`) and 0.3 m of slack
+CONTACT_CLEARANCE = ROBOT_RADIUS + 0.3
+#: m of free space around a contact point (:func:`contact_points`) in which a contact with
+#: a known bearing contradicts the belief: the robot is touched 0.13 m (the chassis' front
+#: face) to 0.22 m (its rear corners) from its centre, so the obstacle lies within 0.09 m of
+#: the point on :data:`ROBOT_RADIUS`
+CONTACT_SLACK = 0.1
+#: grid points per axis of :func:`contact_points` (over the 2-sigma ellipsoid of the pose)
+CONTACT_GRID = 9
 #: steps a contradicted belief stays "lost" (unless a restart replaces it first); then it drives
 #: on (tuning cities 13-16, 600 episodes each: "lost" until a restart reached 80.5 % of the
 #: kidnapped goals, 30 steps 85.5 %, 60 steps 86.0 %, with 3.3 / 4.4 / 3.8 contact steps per
@@ -57,12 +68,12 @@ CONTACT_KINDS = ("city", "traffic")
 #: mover's speed (``envs.traffic.VEHICLE_SPEED``)
 PUSH_SPEED = 1.0
 #: rad/s a mover may turn the robot in a contact step (one standard deviation): what the
-#: fastest mover's step at the robot's rim can turn it, PUSH_SPEED / 0.22 m (4.5 rad/s; on
+#: fastest mover's step at the robot's rim can turn it, PUSH_SPEED / ROBOT_RADIUS (4.5 rad/s; on
 #: held-out city 22 a vehicle's push turned a robot 2.2 rad in 0.7 s, stop 35). Two such steps make
 #: the heading too uncertain to steer on ("lost"), until the images narrow it again.
 #: Tuning cities 13-14, the scripted agent on the EKF belief among traffic, 200 episodes:
 #: 1 rad/s 0.995 success, 2.54 contact steps per episode; 4.5 rad/s 0.99, 1.49
-PUSH_TURN_RATE = PUSH_SPEED / 0.22
+PUSH_TURN_RATE = PUSH_SPEED / ROBOT_RADIUS
 #: a step's contact: False (none), True (something fixed: a contact of unknown kind), or the
 #: kinds touched (``info["collision_with"]``, a collection of ``CONTACT_KINDS``)
 Contact = bool | Collection[str]
@@ -128,12 +139,65 @@ def check_free_space(free_space: object) -> FreeSpace | None:
     return free_space
 
 
-def contact_contradicts(free_space: FreeSpace, x: Array, P: Array) -> bool:
-    """Whether a contact contradicts the belief ``x`` (3,), ``P`` (3, 3): the map is free for
-    ``CONTACT_CLEARANCE`` plus two position standard deviations all around its mean."""
-    sigma = float(np.sqrt(max(np.linalg.eigvalsh(P[:2, :2])[-1], 0.0)))
-    free = np.asarray(free_space(np.asarray(x[None, :2], dtype=np.float64),
-                                 CONTACT_CLEARANCE + 2.0 * sigma))
-    if free.shape != (1,):
+def contact_contradicts(free_space: FreeSpace, x: Array, P: Array,
+                        bearing: float | None = None) -> bool:
+    """Whether a contact contradicts the belief ``x`` (3,), ``P`` (3, 3).
+
+    Without a ``bearing``: the map is free for ``CONTACT_CLEARANCE`` plus two position
+    standard deviations all around the belief's mean. With the ``bearing`` (rad, from the
+    heading) of where the robot was touched (``info["collision_bearing"]``): the map is free
+    for ``CONTACT_SLACK`` (plus the points' spacing) at the contact point
+    (:func:`contact_points`) of every pose within two standard deviations of the belief:
+    a wall beside or behind a belief that was touched ahead does not explain the contact.
+    A heading too uncertain for the bearing to say a side (2 sigma >= pi) falls back to
+    the rule without one."""
+    if bearing is None or not np.isfinite(bearing) or 4.0 * P[2, 2] >= np.pi ** 2:
+        sigma = float(np.sqrt(max(np.linalg.eigvalsh(P[:2, :2])[-1], 0.0)))
+        return bool(np.all(_free(free_space, np.asarray(x[None, :2], dtype=np.float64),
+                                 CONTACT_CLEARANCE + 2.0 * sigma)))
+    points, spacing = contact_points(x, P, float(bearing))
+    return bool(np.all(_free(free_space, points, CONTACT_SLACK + spacing)))
+
+
+def contact_points(x: Array, P: Array, bearing: float, n: int = CONTACT_GRID
+                   ) -> tuple[Array, float]:
+    """Where a robot at a pose within two standard deviations of the belief ``x`` (3,),
+    ``P`` (3, 3) would have been touched at ``bearing``: ``p + ROBOT_RADIUS [cos(th +
+    bearing), sin(th + bearing)]`` for the poses ``(p, th) = x + 2 L s`` (``P = L L^T``) of
+    an ``n``-per-axis grid of ``s`` in the unit ball.
+
+    Returns
+    -------
+    points : ndarray (k, 2)
+    spacing : float
+        m within which every contact point of the 2-sigma ellipsoid lies from one of
+        ``points`` (half a grid cell's diagonal: what a map query's margin adds).
+    """
+    L = np.linalg.cholesky(P + 1e-12 * np.eye(3))
+    t = np.linspace(-1.0, 1.0, n)
+    grid = np.stack(np.meshgrid(t, t, t), -1).reshape(-1, 3)
+    grid = grid[np.einsum("ij,ij->i", grid, grid) <= 1.0 + 1e-9]
+    poses = x + 2.0 * grid @ L.T
+    angle = poses[:, 2] + bearing
+    points = poses[:, :2] + ROBOT_RADIUS * np.stack([np.cos(angle), np.sin(angle)], -1)
+    reach = float(np.sqrt(max(np.linalg.eigvalsh(P[:2, :2])[-1], 0.0))
+                  + ROBOT_RADIUS * np.sqrt(max(P[2, 2], 0.0)))
+    return points, float(np.sqrt(3.0) / 2.0 * 4.0 / (n - 1) * reach)
+
+
+def check_bearing(bearing: object, name: str = "bearing") -> float | None:
+    """``bearing`` as a float (NaN: no bearing, as None); else a TypeError naming it."""
+    if bearing is None:
+        return None
+    if isinstance(bearing, (bool, np.bool_)) or not isinstance(bearing, (int, float, np.number)):
+        raise TypeError(f"{name} must be None or a float in rad (info['collision_bearing']), "
+                        f"got {bearing!r}")
+    return float(bearing) if np.isfinite(bearing) else None
+
+
+def _free(free_space: FreeSpace, points: Array, margin: float) -> Array:
+    """``free_space(points, margin)``, checked to return one bool per point."""
+    free = np.asarray(free_space(points, margin))
+    if free.shape != (len(points),):
         raise ValueError(f"free_space must return one bool per point, got shape {free.shape}")
-    return bool(free[0])
+    return free

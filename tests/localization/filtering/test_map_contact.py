@@ -8,12 +8,16 @@ import pytest
 from localization.filtering.map_contact import (
     CONTACT_CLEARANCE,
     CONTACT_LOST_STEPS,
+    CONTACT_SLACK,
     PUSH_SPEED,
     PUSH_TURN_RATE,
+    ROBOT_RADIUS,
     blocked_motion,
+    check_bearing,
     check_free_space,
     contact_contradicts,
     contact_kinds,
+    contact_points,
 )
 
 X = np.array([1.0, 2.0, 0.3])
@@ -26,7 +30,7 @@ class Map:
         self.free, self.margins = free, []
 
     def __call__(self, points: np.ndarray, margin: float) -> np.ndarray:
-        assert points.shape == (1, 2)
+        assert points.ndim == 2 and points.shape[1] == 2
         self.margins.append(margin)
         return np.full(len(points), self.free)
 
@@ -44,6 +48,75 @@ def test_the_room_needed_grows_with_the_position_uncertainty() -> None:
     contact_contradicts(room, X, np.array([[0.09, 0.0, 0.0], [0.0, 0.01, 0.0],
                                            [0.0, 0.0, 1.0]]))
     assert room.margins == [pytest.approx(CONTACT_CLEARANCE + 0.6)]
+
+
+class HalfPlane:
+    """A free_space with a wall: everything at ``(p - origin) . normal > 0`` is a building."""
+
+    def __init__(self, origin: np.ndarray, normal: np.ndarray) -> None:
+        self.origin, self.normal = np.asarray(origin, float), np.asarray(normal, float)
+
+    def __call__(self, points: np.ndarray, margin: float) -> np.ndarray:
+        return (points - self.origin) @ self.normal < -margin
+
+
+def _wall(x: np.ndarray, angle: float, distance: float) -> HalfPlane:
+    """A wall ``distance`` m from the pose ``x`` in the direction ``x[2] + angle``."""
+    u = np.array([np.cos(x[2] + angle), np.sin(x[2] + angle)])
+    return HalfPlane(x[:2] + distance * u, u)
+
+
+P_SMALL = np.diag([0.05 ** 2, 0.05 ** 2, 0.05 ** 2])
+
+
+@pytest.mark.parametrize("bearing", [0.0, np.pi / 2, -2.5])
+def test_a_bearing_asks_the_map_only_at_the_side_that_was_touched(bearing: float) -> None:
+    """A wall at the robot's rim where it was touched explains the contact; the same wall
+    on the other side does not (without a bearing it does: the rule around the mean)."""
+    at_contact = _wall(X, bearing, ROBOT_RADIUS)
+    opposite = _wall(X, bearing + np.pi, ROBOT_RADIUS)
+    assert not contact_contradicts(at_contact, X, P_SMALL, bearing)
+    assert contact_contradicts(opposite, X, P_SMALL, bearing)
+    assert not contact_contradicts(opposite, X, P_SMALL)
+    assert not contact_contradicts(opposite, X, P_SMALL, np.nan)  # NaN: no bearing
+
+
+def test_a_wide_belief_may_be_touched_at_a_wall_two_sigma_away() -> None:
+    """A wall 0.5 m beyond the touched rim: explained for a belief 0.3 m wide (2 sigma
+    reaches it), a contradiction for one 0.05 m wide; a heading too uncertain to tell a
+    side (2 sigma >= pi) falls back to the rule around the mean."""
+    wall = _wall(X, 0.0, ROBOT_RADIUS + 0.5)
+    assert contact_contradicts(wall, X, P_SMALL, 0.0)
+    assert not contact_contradicts(wall, X, np.diag([0.3 ** 2, 0.3 ** 2, 0.05 ** 2]), 0.0)
+    behind = _wall(X, np.pi, 0.3)
+    assert contact_contradicts(behind, X, np.diag([0.05 ** 2, 0.05 ** 2, 0.8 ** 2]), 0.0)
+    assert not contact_contradicts(behind, X, np.diag([0.05 ** 2, 0.05 ** 2, 1.6 ** 2]), 0.0)
+
+
+def test_contact_points_cover_the_two_sigma_ellipsoid() -> None:
+    """Every pose inside the 2-sigma ellipsoid is touched within ``spacing`` of a grid
+    point, and no grid point lies outside it."""
+    P = np.array([[0.09, 0.03, 0.01], [0.03, 0.04, 0.0], [0.01, 0.0, 0.2]])
+    points, spacing = contact_points(X, P, 0.7)
+    rng = np.random.default_rng(0)
+    s = rng.normal(size=(2000, 3))
+    s *= rng.uniform(0, 1, (2000, 1)) ** (1 / 3) / np.linalg.norm(s, axis=1, keepdims=True)
+    poses = X + 2.0 * s @ np.linalg.cholesky(P).T
+    touched = poses[:, :2] + ROBOT_RADIUS * np.stack([np.cos(poses[:, 2] + 0.7),
+                                                      np.sin(poses[:, 2] + 0.7)], -1)
+    gaps = np.linalg.norm(touched[:, None] - points[None], axis=2).min(axis=1)
+    assert gaps.max() <= spacing
+    assert np.linalg.norm(points - X[:2], axis=1).max() <= 2 * 0.3 + ROBOT_RADIUS + 1e-9
+    assert 0.0 < CONTACT_SLACK < CONTACT_CLEARANCE - ROBOT_RADIUS
+
+
+def test_bad_bearings_are_named() -> None:
+    assert check_bearing(None) is None and check_bearing(float("nan")) is None
+    assert check_bearing(np.float32(1.5)) == pytest.approx(1.5)
+    with pytest.raises(TypeError, match="bearing must be None or a float"):
+        check_bearing("ahead")
+    with pytest.raises(TypeError, match="bearing must be None or a float"):
+        check_bearing(True)
 
 
 def test_bad_maps_are_named() -> None:
@@ -82,6 +155,29 @@ def test_a_contradicting_contact_makes_the_belief_lost_for_a_while(localizer, dr
     assert statuses == ["lost"] * CONTACT_LOST_STEPS + ["tracking"], statuses
 
 
+class Behind:
+    """A wall 0.3 m behind wherever the belief ``f`` is (0.1 m from the robot's rim)."""
+
+    def __init__(self) -> None:
+        self.f = None
+
+    def __call__(self, points: np.ndarray, margin: float) -> np.ndarray:
+        return _wall(self.f.x, np.pi, 0.3)(points, margin)
+
+
+@pytest.mark.parametrize(("bearing", "status"), [(0.0, "lost"), (np.pi, "tracking"),
+                                                 (None, "tracking")])
+def test_the_filter_asks_the_map_where_the_bumper_was_touched(localizer, drive, bearing,
+                                                               status):
+    """A wall just behind the belief explains a contact behind it, or one of unknown side,
+    but not one ahead: that belief is wrong ("lost")."""
+    behind = Behind()
+    f, W, controls = _tracking(localizer, drive, behind)
+    behind.f = f
+    f.step(controls[59], W[60], contact=("city",), bearing=bearing)
+    assert f.belief_status == status
+
+
 @pytest.mark.parametrize("free_space", [Map(False), None], ids=["at a wall", "no map"])
 def test_a_contact_the_map_explains_or_without_a_map_changes_nothing(localizer, drive,
                                                                       free_space):
@@ -118,11 +214,12 @@ def test_a_push_by_a_mover_widens_the_step_by_the_mover_s_step() -> None:
 
 def test_the_push_constants_are_the_env_s_movers_and_robot() -> None:
     """The filter does not import the env; its push model must stay in step with it."""
-    from envs.robot import ROBOT_RADIUS
+    from envs.robot import ROBOT_RADIUS as ENV_ROBOT_RADIUS
     from envs.traffic import PEDESTRIAN_SPEED, VEHICLE_SPEED
 
     assert PUSH_SPEED == max(*VEHICLE_SPEED, *PEDESTRIAN_SPEED)
     assert PUSH_TURN_RATE == pytest.approx(PUSH_SPEED / ROBOT_RADIUS)
+    assert ROBOT_RADIUS == ENV_ROBOT_RADIUS
 
 
 def test_contact_kinds_read_the_env_s_collision_with() -> None:
@@ -189,6 +286,7 @@ def test_the_wrapper_passes_the_bumper_to_the_belief(localizer) -> None:
             break
     env.close()
     assert info["collision"] and info["collision_with"] == ("city",)
+    assert abs(info["collision_bearing"]) < 1.0  # driving straight on: touched ahead
     assert info["belief_status"] == "lost"
 
 
