@@ -62,7 +62,7 @@ FILTER_OPTIONS = {
                   "n_neighbors", "proposal_noise", "global_proposal_fraction", "sample_free",
                   "lost_ratio", "doubt_ratio", "confident_weight", "confirm_share",
                   "confirm_steps", "unconfirm_steps", "mode_radius", "heading_scale", "max_modes",
-                  "min_mode_weight", "track_mode", "seed", "contact_motion"),
+                  "min_mode_weight", "track_mode", "seed", "contact_motion", "free_space"),
 }
 
 
@@ -178,7 +178,7 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         ``env.unwrapped.city.free_mask``; None: contacts are ignored); for "particles"
         ParticleBelief's (``n_particles``, ..., ``sample_free``: default poses along the
         map's streets, from ``env.unwrapped.city.street_graph()``; ``seed``: default from
-        ``reset(seed=...)``).
+        ``reset(seed=...)``; ``free_space`` as the EKF's: a contact weighs the particles).
 
     Notes
     -----
@@ -218,9 +218,9 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         self.measurement = measurement
         self.filter = filter
         mm = env.unwrapped.motion_model
+        if "free_space" not in options and hasattr(env.unwrapped, "city"):
+            options["free_space"] = env.unwrapped.city.free_mask
         if filter == "ekf":
-            if "free_space" not in options and hasattr(env.unwrapped, "city"):
-                options["free_space"] = env.unwrapped.city.free_mask
             self.belief: BeliefFilter | ParticleBelief = BeliefFilter(
                 localizer, mm, measurement, gate_probability, relocalize_after,
                 inflate_after=inflate_after, **options)
@@ -284,11 +284,8 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
             raise gym.error.ResetNeeded("call reset() before step()")
         obs, reward, terminated, truncated, info = self.env.step(action)
         w = self.localizer.transform(obs["image"])[0]
-        if isinstance(self.belief, BeliefFilter):  # where the bumper was hit, too
-            nis, status = self.belief.step(self._control(action), w, contact=_contact(info),
-                                           bearing=info.get("collision_bearing"))
-        else:
-            nis, status = self.belief.step(self._control(action), w, contact=_contact(info))
+        nis, status = self.belief.step(self._control(action), w, contact=_contact(info),
+                                       bearing=info.get("collision_bearing"))
         self._publish(info, nis if self.filter == "ekf" else np.nan, status)
         return self.observation(obs), reward, terminated, truncated, info
 

@@ -12,10 +12,18 @@ commanded translation and turn as one standard deviation of what may still have 
 A robot knows its map (the city's buildings) and feels a contact (a bumper,
 ``info["collision"]``). A contact while the belief's mean has free space all around it
 cannot have happened where the belief says the robot is: the belief is wrong, though it may
-still say "doubtful" (coasting with a narrow P) and steer on into the wall. :class:`~localization.filtering.belief.BeliefFilter`
-calls the belief "lost" for ``CONTACT_LOST_STEPS`` steps after such a contact (an agent stops
+still say "doubtful" (coasting with a narrow P) and steer on into the wall.
+:class:`~localization.filtering.belief.BeliefFilter` calls the belief "lost" for ``CONTACT_LOST_STEPS`` steps after such a contact (an agent stops
 and looks), then lets it drive on. Numpy only: the map is a callable, e.g.
 ``env.unwrapped.city.free_mask``.
+
+Where it was touched matters too (``info["collision_bearing"]``, a ring bumper's reading):
+a robot touched ahead needs a wall ahead, so a wall beside or behind a belief no longer
+explains the contact (:func:`contact_contradicts` asks the map at the touched point of
+every pose within two standard deviations, :func:`contact_points`). The particle belief
+weighs each particle by it (:func:`contact_log_likelihood`: MCL's bumper model) and is
+"lost" as the EKF when the map has room at the touched point of most of its weight
+(:func:`weigh_contact`).
 
 What was touched matters (``info["collision_with"]``, :func:`contact_kinds`): movers are not
 on the map, so only a contact with the city can contradict the belief; a contact with a
@@ -30,13 +38,15 @@ from collections.abc import Callable, Collection
 from typing import Any
 
 import numpy as np
+from scipy.special import logsumexp
 
 from localization.geometry import Array, wrap_angle
 
 __all__ = ["CONTACT_CLEARANCE", "CONTACT_GRID", "CONTACT_KINDS", "CONTACT_LOST_STEPS",
-           "CONTACT_MOTIONS", "CONTACT_SLACK", "PUSH_SPEED", "PUSH_TURN_RATE", "ROBOT_RADIUS", "Contact",
-           "FreeSpace", "blocked_motion", "check_bearing", "check_free_space", "contact_contradicts",
-           "contact_kinds", "contact_points"]
+           "CONTACT_MISS", "CONTACT_MOTIONS", "CONTACT_SLACK", "CONTACT_WEIGHT",
+           "PUSH_SPEED", "PUSH_TURN_RATE", "ROBOT_RADIUS", "Contact", "FreeSpace",
+           "blocked_motion", "check_bearing", "check_free_space", "contact_contradicts",
+           "contact_kinds", "contact_log_likelihood", "contact_points", "weigh_contact"]
 
 #: ``free_space(points (n, 2), margin) -> (n,) bool``: whether a disc of radius ``margin`` (m)
 #: around each point is free of buildings (``City.free_mask``)
@@ -52,6 +62,13 @@ CONTACT_CLEARANCE = ROBOT_RADIUS + 0.3
 #: face) to 0.22 m (its rear corners) from its centre, so the obstacle lies within 0.09 m of
 #: the point on :data:`ROBOT_RADIUS`
 CONTACT_SLACK = 0.1
+#: p(contact | pose) of a pose where the map has room (:func:`contact_log_likelihood`):
+#: a contact with the city there is a bump sensor's false alarm or a map error
+CONTACT_MISS = 0.05
+#: share of a particle belief's weight that must sit where the map has room for a contact
+#: to contradict it (:class:`~localization.filtering.particles.ParticleBelief`): the EKF's
+#: two standard deviations
+CONTACT_WEIGHT = 0.95
 #: grid points per axis of :func:`contact_points` (over the 2-sigma ellipsoid of the pose)
 CONTACT_GRID = 9
 #: steps a contradicted belief stays "lost" (unless a restart replaces it first); then it drives
@@ -157,6 +174,34 @@ def contact_contradicts(free_space: FreeSpace, x: Array, P: Array,
                                  CONTACT_CLEARANCE + 2.0 * sigma)))
     points, spacing = contact_points(x, P, float(bearing))
     return bool(np.all(_free(free_space, points, CONTACT_SLACK + spacing)))
+
+
+def contact_log_likelihood(free_space: FreeSpace, X: Array, bearing: float | None = None
+                           ) -> Array:
+    """log p(contact | pose) for particles ``X`` (N, 3): 0 where the map explains a contact
+    with the city (a building within ``CONTACT_SLACK`` of the touched point at ``bearing``,
+    or without a bearing within ``CONTACT_CLEARANCE`` of the position), ``log
+    CONTACT_MISS`` where it has room (MCL's bumper model: a particle in the open that feels
+    a bump is unlikely, not impossible)."""
+    X = np.asarray(X, dtype=np.float64)
+    if bearing is None or not np.isfinite(bearing):
+        free = _free(free_space, X[:, :2], CONTACT_CLEARANCE)
+    else:
+        angle = X[:, 2] + bearing
+        touched = X[:, :2] + ROBOT_RADIUS * np.stack([np.cos(angle), np.sin(angle)], -1)
+        free = _free(free_space, touched, CONTACT_SLACK)
+    return np.where(free, np.log(CONTACT_MISS), 0.0)
+
+
+def weigh_contact(free_space: FreeSpace, X: Array, log_weights: Array,
+                  bearing: float | None = None) -> tuple[Array, bool]:
+    """A contact with the city against particles ``X`` (N, 3) of ``log_weights`` (N,):
+    its :func:`contact_log_likelihood` (N,), and whether it contradicts the belief (more
+    than ``CONTACT_WEIGHT`` of the weight where the map has room)."""
+    log_B = contact_log_likelihood(free_space, X, bearing)
+    explained = log_weights[log_B == 0.0]
+    share = float(np.exp(logsumexp(explained))) if explained.size else 0.0
+    return log_B, share < 1.0 - CONTACT_WEIGHT
 
 
 def contact_points(x: Array, P: Array, bearing: float, n: int = CONTACT_GRID

@@ -7,6 +7,9 @@ log-weights ``l_i``; with the names of the code::
     predict:  X_i = F(X_i, k U) + T(yaw_i) e_i,   e_i ~ N(0, Q),  Q = diag(sqrt a) Q_body diag(sqrt a)
     weight:   l_i = l_i + log L_i,   l = l - logsumexp(l)           (weights w_i = exp(l_i))
               log L_i = -0.5 min(d2_i, gate),   gate = chi2.ppf(gate_probability, dof)
+    bump:     l_i = l_i + log B_i on a contact with the city (``free_space``): B_i = 1 where
+              the map has a wall at the particle's touched point, CONTACT_MISS where it has
+              room; "lost" for CONTACT_LOST_STEPS when that room holds > CONTACT_WEIGHT
     AMCL:     w_avg = sum_i w_i L_i / sum_i w_i  (i over the particles not injected last step)
               w_slow += alpha_slow (w_avg - w_slow),  w_fast += alpha_fast (w_avg - w_fast)
               inject p = min(max_injection, max(0, 1 - w_fast / (injection_ratio w_slow)))
@@ -36,19 +39,26 @@ from sklearn.exceptions import NotFittedError
 
 from localization._validation import check_choice, check_int, check_real
 from localization.filtering._modes import Mode, find_modes
+from localization.filtering._particle_state import ParticleStateMixin
 from localization.filtering.augmented_mcl import LikelihoodAverages
 from localization.filtering.district_particles import check_measurement_noise, image_models
 from localization.filtering.map_contact import (
+    CONTACT_LOST_STEPS,
     CONTACT_MOTIONS,
     Contact,
+    FreeSpace,
     blocked_motion,
+    check_bearing,
+    check_free_space,
     contact_kinds,
+    weigh_contact,
 )
 from localization.filtering.measurement_noise import inflate
 from localization.filtering.mode_confirmation import ModeConfirmation
 from localization.filtering.mode_tracker import make_tracker
 from localization.filtering.particle_likelihood import MEASUREMENTS
 from localization.filtering.particle_motion import is_unicycle, move_particles
+from localization.filtering.particle_start import SampleFree, free_particles, gaussian_particles
 from localization.filtering.recorded_run import run_recorded
 from localization.filtering.resampling import resample_and_inject
 from localization.geometry import Array, wrap_angle
@@ -66,10 +76,9 @@ RESET_MODES = ("image", "global")
 #: from images (``confirm_share``); "tracking": otherwise.
 PARTICLE_STATUSES = ("initial", "tracking", "ambiguous", "doubtful", "relocalizing", "lost",
                      "out_of_domain")
-SampleFree = Callable[[int, np.random.Generator], ArrayLike]
 
 
-class ParticleBelief:
+class ParticleBelief(ParticleStateMixin):
     """Particle-filter pose belief fed with image features (see the module docstring).
 
     Parameters
@@ -128,6 +137,11 @@ class ParticleBelief:
         How a contact step moves the particles: blocked (``[0, k w]`` plus a draw of
         :func:`~localization.filtering.map_contact.blocked_motion`'s covariance each, as the
         EKF's), or with the commanded control as any other step.
+    free_space : callable, optional
+        The map (``city.free_mask``): a contact with the city weighs each particle by
+        :func:`~localization.filtering.map_contact.contact_log_likelihood`, and one that
+        leaves less than ``1 - CONTACT_WEIGHT`` of the weight where the map explains it
+        makes the belief "lost" for ``CONTACT_LOST_STEPS`` steps (as the EKF's). None: no.
     """
 
     def __init__(self, localizer: Any, motion_model: Any, measurement: str = "representation",
@@ -144,7 +158,8 @@ class ParticleBelief:
                  mode_radius: float = 1.0, heading_scale: float = 2.0, max_modes: int = 64,
                  min_mode_weight: float = 0.002,
                  track_mode: bool | dict[str, Any] = True,
-                 seed: int | None = None, contact_motion: str = "blocked") -> None:
+                 seed: int | None = None, contact_motion: str = "blocked",
+                 free_space: FreeSpace | None = None) -> None:
         if measurement not in MEASUREMENTS:
             raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
         if isinstance(n_particles, bool) or int(n_particles) != n_particles or n_particles < 1:
@@ -193,6 +208,7 @@ class ParticleBelief:
         self.R, self.gate = self.likelihood.R, self.likelihood.gate
         self.rng = np.random.default_rng(seed)
         self.contact_motion = check_choice(contact_motion, "contact_motion", CONTACT_MOTIONS)
+        self.free_space, self._bumped = check_free_space(free_space), 0
         self.tracker = make_tracker(track_mode, localizer, motion_model, measurement,
                                     alpha=self.alpha, radius=self.mode_radius,
                                     heading_scale=self.heading_scale,
@@ -204,50 +220,6 @@ class ParticleBelief:
         self.injected = 0
         self._recovering = False  # Augmented MCL injected this step
         self._fresh = np.zeros(0, dtype=bool)  # particles injected at the last step
-
-    # ------------------------------------------------------------------ state
-    @property
-    def confirmed(self) -> bool:
-        """Have the images confirmed the dominant mode since particles were seeded from
-        them (:class:`~localization.filtering.mode_confirmation.ModeConfirmation`)?"""
-        return self.confirmation.confirmed
-
-    @property
-    def weights(self) -> Array:
-        """Normalised weights (N,)."""
-        self._check()
-        return np.exp(self.log_weights)  # type: ignore[arg-type]
-
-    @property
-    def ess(self) -> float:
-        """Effective sample size ``1 / sum w_i^2``."""
-        return float(1.0 / np.sum(self.weights ** 2))
-
-    @property
-    def pose_mean(self) -> Array:
-        """Mean (3,) of the dominant mode (its EKF's with ``track_mode``)."""
-        self._check()
-        return self.modes[0].mean.copy() if self.tracker is None else self.tracker.mean
-
-    @property
-    def pose_cov(self) -> Array:
-        """Covariance (3, 3) of the dominant mode (heading residuals wrapped)."""
-        self._check()
-        return self.modes[0].cov.copy() if self.tracker is None else self.tracker.cov
-
-    x, P = pose_mean, pose_cov  # BeliefFilter's names
-
-    @property
-    def hypotheses(self) -> dict[str, Array]:
-        """The modes, heaviest first: "weights" (k,), "means" (k, 3), "covs" (k, 3, 3)."""
-        self._check()
-        return {"weights": np.array([m.weight for m in self.modes]),
-                "means": np.array([m.mean for m in self.modes]),
-                "covs": np.array([m.cov for m in self.modes])}
-
-    def _check(self) -> None:
-        if self.particles is None:
-            raise RuntimeError("the belief is not initialised: call reset() first")
 
     def _check_w(self, w: ArrayLike) -> Array:
         w = np.asarray(w, dtype=np.float64)
@@ -272,15 +244,6 @@ class ParticleBelief:
     def _jitter(self, centres: Array, n: int) -> Array:
         return self._proposals.jitter(centres, n, self.rng)
 
-    def _free(self, n: int) -> Array:
-        if self.sample_free is None:
-            return self._jitter(self._proposals.train_poses, n)
-        X = np.asarray(self.sample_free(n, self.rng), dtype=np.float64)
-        if X.shape != (n, 3) or not np.all(np.isfinite(X)):
-            raise ValueError(f"sample_free must return finite poses of shape ({n}, 3), got "
-                             f"{X.shape}")
-        return X
-
     # ------------------------------------------------------------------- run
     def reset(self, w: ArrayLike, mode: str = "image", x0: ArrayLike | None = None,
               P0: ArrayLike | None = None) -> str:
@@ -299,22 +262,19 @@ class ParticleBelief:
             raise ValueError(f"unknown mode {mode!r}; choose one of {RESET_MODES}")
         N = self.n_particles
         if x0 is not None:
-            x0 = np.asarray(x0, dtype=np.float64)
-            P0 = np.diag([0.01, 0.01, 0.001]) if P0 is None else np.asarray(P0, float)
-            if x0.shape != (3,) or P0.shape != (3, 3) or not np.all(np.isfinite(x0)):
-                raise ValueError(f"x0 must be a finite (3,) pose and P0 (3, 3), got "
-                                 f"{x0.shape} and {P0.shape}")
-            X = self.rng.multivariate_normal(x0, P0, size=N, method="eigh")
+            X = gaussian_particles(x0, P0, N, self.rng)
         elif mode == "image":
             X = self._jitter(self.proposals(w), N)
         else:
             n_prop = round(self.global_proposal_fraction * N)
-            X = np.vstack([self._jitter(self.proposals(w), n_prop), self._free(N - n_prop)])
+            X = np.vstack([self._jitter(self.proposals(w), n_prop), free_particles(
+                self.sample_free, N - n_prop, self.rng,
+                lambda n: self._jitter(self._proposals.train_poses, n))])
         self._set(X)
         if self.tracker is not None:
             self.tracker.reset(w, self.modes[0], known=x0 is not None)
         self.amcl.reset()
-        self.status, self.injected, self._recovering = "initial", 0, False
+        self.status, self.injected, self._recovering, self._bumped = "initial", 0, False, 0
         self.confirmation.reset(x0 is not None)
         self._confirm(w)
         self._fresh = np.zeros(self.n_particles, dtype=bool)
@@ -344,10 +304,12 @@ class ParticleBelief:
         z = self.likelihood.measure(w) if z is None else z
         return self.likelihood.distances(z, self.particles if X is None else X)
 
-    def step(self, u: ArrayLike, w: ArrayLike, contact: Contact = False) -> tuple[float, str]:
-        """Predict with the commanded control ``u`` (2,), weight with the features ``w``,
-        inject and resample. ``contact``: what the robot touched this step
-        (``info["collision_with"]``, or True; see ``contact_motion``).
+    def step(self, u: ArrayLike, w: ArrayLike, contact: Contact = False,
+             bearing: float | None = None) -> tuple[float, str]:
+        """Predict with the commanded control ``u`` (2,), weight with the features ``w``
+        (and a contact with the city, touched at ``bearing``, with ``free_space``), inject and
+        resample. ``contact``: what the robot touched this step (``info["collision_with"]``,
+        or True; see ``contact_motion``); ``bearing``: ``info["collision_bearing"]``.
 
         Returns
         -------
@@ -358,15 +320,16 @@ class ParticleBelief:
         self._check()
         w = self._check_w(w)
         self.predict(u, contact)
+        log_B = self._bump(contact_kinds(contact), check_bearing(bearing))
         contact = contact_kinds(contact) if self.contact_motion == "blocked" else frozenset()
         self.injected = 0
         z = self.likelihood.measure(w)
         if not np.all(np.isfinite(z)):
-            self._set(self.particles, self.log_weights)
-            self.status = "out_of_domain"
+            self._set(self.particles, self.log_weights + log_B)
+            self.status = "lost" if self._bumped else "out_of_domain"
             self._track(u, w, contact)
             return np.nan, self.status
-        log_L = self.likelihood.log_likelihood(z, self.particles)
+        log_L = self.likelihood.log_likelihood(z, self.particles) + log_B
         old = self.log_weights[~self._fresh] if (~self._fresh).any() else self.log_weights
         w_avg = float(np.exp(logsumexp(old + log_L[~self._fresh] if (~self._fresh).any()
                                        else old + log_L) - logsumexp(old)))
@@ -387,6 +350,17 @@ class ParticleBelief:
         self.status = self._status(w_avg)
         self._track(u, w, contact)
         return w_avg, self.status
+
+    def _bump(self, kinds: frozenset[str], bearing: float | None) -> Array | float:
+        """The log-likelihood (N,) of a contact with the city at the particles (0 without);
+        "lost" for ``CONTACT_LOST_STEPS`` steps after one that contradicts the belief."""
+        self._bumped = max(self._bumped - 1, 0)
+        if "city" not in kinds or self.free_space is None:
+            return 0.0
+        log_B, contradicted = weigh_contact(self.free_space, self.particles, self.log_weights,
+                                            bearing)
+        self._bumped = CONTACT_LOST_STEPS if contradicted else self._bumped
+        return log_B
 
     def _draw(self, share: float) -> int:
         """How many particles to inject at this share: Binomial(N, share)."""
@@ -419,7 +393,7 @@ class ParticleBelief:
                                            self.heading_scale))
 
     def _status(self, w_avg: float) -> str:
-        if self.amcl.w_fast < self.lost_ratio * self.amcl.w_slow:
+        if self._bumped or self.amcl.w_fast < self.lost_ratio * self.amcl.w_slow:
             return "lost"
         if self._recovering:
             return "relocalizing"

@@ -110,6 +110,22 @@ def test_contact_points_cover_the_two_sigma_ellipsoid() -> None:
     assert 0.0 < CONTACT_SLACK < CONTACT_CLEARANCE - ROBOT_RADIUS
 
 
+def test_the_contact_likelihood_of_particles_asks_the_map_at_their_touched_point() -> None:
+    """0 where a wall is at the touched rim, log CONTACT_MISS where the map has room; without
+    a bearing, a wall anywhere within CONTACT_CLEARANCE explains it."""
+    from localization.filtering.map_contact import CONTACT_MISS, contact_log_likelihood
+
+    wall = HalfPlane(np.array([1.0, 0.0]), np.array([1.0, 0.0]))  # buildings at x > 1
+    X = np.array([[1.0 - ROBOT_RADIUS, 0.0, 0.0], [1.0 - ROBOT_RADIUS, 0.0, np.pi],
+                  [-3.0, 0.0, 0.0]])
+    np.testing.assert_allclose(contact_log_likelihood(wall, X, 0.0),
+                               [0.0, np.log(CONTACT_MISS), np.log(CONTACT_MISS)])
+    np.testing.assert_allclose(contact_log_likelihood(wall, X),
+                               [0.0, 0.0, np.log(CONTACT_MISS)])
+    np.testing.assert_allclose(contact_log_likelihood(wall, X, np.nan),
+                               contact_log_likelihood(wall, X))
+
+
 def test_bad_bearings_are_named() -> None:
     assert check_bearing(None) is None and check_bearing(float("nan")) is None
     assert check_bearing(np.float32(1.5)) == pytest.approx(1.5)

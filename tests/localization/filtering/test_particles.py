@@ -124,6 +124,58 @@ def test_a_blocked_contact_holds_the_particles_and_spreads_them_by_the_step(loca
         _belief(localizer, contact_motion="slide")
 
 
+class _Wall:
+    """A free_space with a building at x > ``edge``."""
+
+    def __init__(self, edge: float) -> None:
+        self.edge = edge
+
+    def __call__(self, points: np.ndarray, margin: float) -> np.ndarray:
+        return points[:, 0] < self.edge - margin
+
+
+def test_a_contact_weighs_the_particles_by_the_map_at_the_touched_side(localizer, features):
+    """Particles facing east, half of them at a wall ahead: a bump ahead moves the weight to
+    those (CONTACT_MISS for the rest); a bump behind is explained by none, and with 95 % of
+    the weight in the open the belief is "lost" for CONTACT_LOST_STEPS steps."""
+    from localization.filtering.map_contact import CONTACT_LOST_STEPS, CONTACT_MISS
+
+    W, poses, _ = features
+    pf = _belief(localizer, free_space=_Wall(0.3), track_mode=False)
+    pf.reset(W[0], x0=poses[0])
+    X = np.zeros((500, 3))
+    X[:250, 0] = 0.1  # rim 0.32: at the wall (slack 0.1)
+    X[250:, 0] = -2.0
+    pf._set(X)
+    pf.step(np.zeros(2), W[1], contact=("city",), bearing=0.0)
+    at_wall = pf.particles[:, 0] > -1.0
+    ratio = pf.weights[at_wall].mean() / pf.weights[~at_wall].mean()
+    assert ratio > 0.5 / CONTACT_MISS and pf.status != "lost"
+    pf._set(X)
+    pf.step(np.zeros(2), W[1], contact=("city",), bearing=np.pi)
+    statuses = [pf.status]
+    for t in range(CONTACT_LOST_STEPS):
+        pf.step(np.zeros(2), W[1])
+        statuses.append(pf.status)
+    assert statuses[:CONTACT_LOST_STEPS] == ["lost"] * CONTACT_LOST_STEPS
+    assert statuses[-1] != "lost" or pf.amcl.w_fast < pf.lost_ratio * pf.amcl.w_slow
+
+
+def test_without_a_map_or_with_traffic_a_contact_weighs_nothing(localizer, features):
+    W, poses, controls = features
+    runs = []
+    for kw, contact in (({}, ("city",)), ({"free_space": _Wall(0.3)}, ("traffic",)),
+                        ({"free_space": _Wall(0.3)}, ())):
+        pf = _belief(localizer, **kw)
+        pf.reset(W[0], x0=poses[0])
+        pf.step(controls[0], W[1], contact=contact, bearing=0.0)
+        runs.append(pf.log_weights)
+    np.testing.assert_array_equal(runs[1], runs[2])
+    assert pf.status != "lost"
+    with pytest.raises(TypeError, match="free_space must be None or a callable"):
+        _belief(localizer, free_space=np.ones(3))
+
+
 # ---------------------------------------------------------------- modes
 def test_dominant_mode_summary_of_two_modes_is_the_heavier_one(localizer, features):
     rng = np.random.default_rng(0)
