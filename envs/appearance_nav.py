@@ -112,7 +112,7 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
     ``"city"`` (buildings and the boundary) and ``"traffic"`` (vehicles and pedestrians),
     empty without contact), ``collision_bearing`` (rad, counter-clockwise from the heading:
     where the robot touched the city first in the step, 0 ahead, +-pi behind, what a ring
-    bumper reports; NaN without a city contact), ``tipped_over`` (tilted past ``envs.upright.TIPPED_OVER_TILT``, on
+    bumper reports; None without a city contact), ``tipped_over`` (tilted past ``envs.upright.TIPPED_OVER_TILT``, on
     its side or back; the upright torque rights it), ``distance_to_goal`` (m), ``control``
     (the clipped U applied); with
     ``city_layout="lookalike"`` also ``twins`` (m, 3): the true pose's twin poses in the city
@@ -245,7 +245,7 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         self._steps = 0
         self._distance = self._distance_to_goal()
         info = self._info((), control=np.zeros(2))
-        info["collision_bearing"] = math.nan
+        info["collision_bearing"] = None
         return self._obs(), info
 
     def step(self, action: ArrayLike) -> tuple[Obs, float, bool, bool, dict[str, Any]]:
@@ -254,14 +254,14 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
         self.data.ctrl[:] = self._wheel_speeds(u)
         if self._conditions.traffic is not None:
             self._conditions.advance(self.data, self.dt, self.pose[:2])
-        traffic_hit, bearing = False, math.nan
+        traffic_hit, bearing = False, None
         for _ in range(self.frame_skip):  # the contact sensor sees the state at the start of each substep
             self._upright.apply(self.data)
             mujoco.mj_step(self.model, self.data)
-            if math.isnan(bearing) and self.data.sensordata[self._collision_adr] > 0:
+            if bearing is None and self.data.sensordata[self._collision_adr] > 0:
                 bearing = contact_bearing(self.data.sensordata[self._collision_adr:], self.pose)
             traffic_hit = traffic_hit or self._conditions.hit(self.data)
-        city_hit = not math.isnan(bearing)
+        city_hit = bearing is not None
         collision = city_hit or traffic_hit
         self._sync_kinematics()
         self._steps += 1
