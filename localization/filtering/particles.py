@@ -320,8 +320,9 @@ class ParticleBelief(ParticleStateMixin):
         self._check()
         w = self._check_w(w)
         self.predict(u, contact)
-        log_B = self._bump(contact_kinds(contact), check_bearing(bearing))
-        contact = contact_kinds(contact) if self.contact_motion == "blocked" else frozenset()
+        kinds = contact_kinds(contact)
+        log_B = self._bump(kinds, check_bearing(bearing))
+        contact = kinds if self.contact_motion == "blocked" else frozenset()
         self.injected = 0
         z = self.likelihood.measure(w)
         if not np.all(np.isfinite(z)):

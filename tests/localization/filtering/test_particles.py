@@ -162,16 +162,27 @@ def test_a_contact_weighs_the_particles_by_the_map_at_the_touched_side(localizer
 
 
 def test_without_a_map_or_with_traffic_a_contact_weighs_nothing(localizer, features):
+    """A map that has room everywhere ahead (every particle's touched point is free): a
+    bump into the city weighs the particles and makes the belief "lost"; the same bump
+    without a map, or a bump into traffic with the map, leaves particles and weights those
+    of the same seeded run without the map."""
     W, poses, controls = features
-    runs = []
-    for kw, contact in (({}, ("city",)), ({"free_space": _Wall(0.3)}, ("traffic",)),
-                        ({"free_space": _Wall(0.3)}, ())):
-        pf = _belief(localizer, **kw)
+
+    def run(free_space, contact):
+        pf = _belief(localizer, free_space=free_space, track_mode=False)
         pf.reset(W[0], x0=poses[0])
         pf.step(controls[0], W[1], contact=contact, bearing=0.0)
-        runs.append(pf.log_weights)
-    np.testing.assert_array_equal(runs[1], runs[2])
-    assert pf.status != "lost"
+        return pf
+
+    room = _Wall(1e9)
+    weighed, plain = run(room, ("city",)), run(None, ("city",))
+    np.testing.assert_array_equal(weighed.particles, plain.particles)  # same draws
+    assert weighed.status == "lost" and plain.status != "lost"
+    for free_space, contact in ((room, ("traffic",)), (None, ("city",))):
+        pf, without = run(free_space, contact), run(None, contact)
+        np.testing.assert_array_equal(pf.particles, without.particles)
+        np.testing.assert_array_equal(pf.log_weights, without.log_weights)
+        assert pf.status == without.status != "lost"
     with pytest.raises(TypeError, match="free_space must be None or a callable"):
         _belief(localizer, free_space=np.ones(3))
 
