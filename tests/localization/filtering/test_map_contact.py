@@ -171,6 +171,32 @@ def test_a_contradicting_contact_makes_the_belief_lost_for_a_while(localizer, dr
     assert statuses == ["lost"] * CONTACT_LOST_STEPS + ["tracking"], statuses
 
 
+def test_a_contact_makes_a_restart_on_trial_lost_too(localizer, drive):
+    """A belief started from the first image is "relocalizing" until the images confirm it;
+    a contradicting contact makes it "lost" (the agent stops) for CONTACT_LOST_STEPS steps,
+    as a tracking belief, then "relocalizing" again while its trial is still open (here:
+    views off the maps). Before, a restart on trial could not be lost: on tuning city 13 one
+    whose images fell off the maps drove into a kiosk 30 times."""
+    from localization.filtering.belief import BeliefFilter
+    from tests.localization.conftest import make_env
+
+    images, _, controls = drive
+    W = localizer.transform(images)
+    off_maps = W[0] + 50.0 * W.std(axis=0)  # psi* and every measurement NaN
+    env = make_env()
+    f = BeliefFilter(localizer, env.unwrapped.motion_model, free_space=Map(True))
+    env.close()
+    f.reset(W[0])
+    assert f.belief_status == "relocalizing" and f._trial is not None
+    steps = [f.step(controls[0], off_maps, contact=("city",))[1]]
+    beliefs = [f.belief_status]
+    for t in range(1, CONTACT_LOST_STEPS + 1):
+        steps.append(f.step(controls[t], off_maps)[1])
+        beliefs.append(f.belief_status)
+    assert set(steps) == {"out_of_domain"} and f._trial is not None
+    assert beliefs == ["lost"] * CONTACT_LOST_STEPS + ["relocalizing"], " ".join(beliefs)
+
+
 class Behind:
     """A wall 0.3 m behind wherever the belief ``f`` is (0.1 m from the robot's rim)."""
 
