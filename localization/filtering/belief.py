@@ -47,6 +47,7 @@ from localization.filtering.localizer_protocol import Localizer, check_localizer
 from localization.filtering.map_contact import (
     CONTACT_LOST_STEPS,
     CONTACT_MOTIONS,
+    REPEAT_CONTACT_STEPS,
     Contact,
     FreeSpace,
     blocked_motion,
@@ -170,6 +171,7 @@ class BeliefFilter(RecoveryMixin):
         self._repeat_view = False  # this step's accepted image was a repeat of the trial's
         self.free_space = check_free_space(free_space)
         self._bumped = 0  # steps left "lost" after a contact that contradicts the belief
+        self._since_contact = REPEAT_CONTACT_STEPS + 1  # steps since the last city contact
 
     @property
     def x(self) -> Array:
@@ -279,8 +281,9 @@ class BeliefFilter(RecoveryMixin):
         ``("traffic",)``; True for a contact of unknown kind, taken as the city's): the
         step is predicted as ``contact_motion`` says (a mover may also have pushed and
         turned the robot); with ``free_space``, a contact with the city where the map has
-        room around the belief makes it "lost" for ``CONTACT_LOST_STEPS`` steps
-        (:mod:`~localization.filtering.map_contact`); ``bearing`` (rad from the heading,
+        room around the belief makes it "lost" for ``CONTACT_LOST_STEPS`` steps; so does,
+        with or without a map, a second contact with the city within
+        ``REPEAT_CONTACT_STEPS`` while not "tracking" (:mod:`~localization.filtering.map_contact`); ``bearing`` (rad from the heading,
         ``info["collision_bearing"]``; None or NaN: unknown) says where the robot was
         touched, so that only the map at that side of the belief explains the contact.
 
@@ -321,11 +324,19 @@ class BeliefFilter(RecoveryMixin):
         elif self.monitor is not None:
             status = self._watch(motion, w, nis, status)
         self._bumped = max(self._bumped - 1, 0)
-        if "city" in kinds and self.free_space is not None and contact_contradicts(
-                self.free_space, self.ekf.x, self.ekf.P, bearing):
+        if "city" in kinds and (self._repeated_contact() or (
+                self.free_space is not None and contact_contradicts(
+                    self.free_space, self.ekf.x, self.ekf.P, bearing))):
             self._bumped = CONTACT_LOST_STEPS
+        self._since_contact = 0 if "city" in kinds else self._since_contact + 1
         self._update_status(status)
         return nis, status
+
+    def _repeated_contact(self) -> bool:
+        """A contact with the city this step is a second one within ``REPEAT_CONTACT_STEPS``
+        (after a step without) while the belief is not "tracking"."""
+        return (0 < self._since_contact <= REPEAT_CONTACT_STEPS
+                and self.belief_status != "tracking")
 
     def _step_motion(self, u: ArrayLike, kinds: frozenset[str]) -> tuple[Array, Array | None]:
         """The control ``k U`` of this step and its extra process noise (a contact's, of

@@ -11,6 +11,7 @@ from localization.filtering.map_contact import (
     CONTACT_SLACK,
     PUSH_SPEED,
     PUSH_TURN_RATE,
+    REPEAT_CONTACT_STEPS,
     ROBOT_RADIUS,
     blocked_motion,
     check_bearing,
@@ -195,6 +196,32 @@ def test_a_contact_makes_a_restart_on_trial_lost_too(localizer, drive):
         beliefs.append(f.belief_status)
     assert set(steps) == {"out_of_domain"} and f._trial is not None
     assert beliefs == ["lost"] * CONTACT_LOST_STEPS + ["relocalizing"], " ".join(beliefs)
+
+
+@pytest.mark.parametrize("free_space", [Map(False), None], ids=["at a wall", "no map"])
+def test_a_second_bump_soon_after_makes_a_coasting_belief_lost(localizer, drive, free_space):
+    """Every contact explained by the map (or no map): a tracking belief bumped twice stays
+    "tracking"; a "doubtful" one (coasting through views off the maps) is "lost" at its
+    second contact within REPEAT_CONTACT_STEPS, not at the first, nor at one that goes on."""
+    f, W, controls = _tracking(localizer, drive, free_space)
+    for t in (60, 62):
+        f.step(controls[t - 1], W[t], contact=("city",))
+        f.step(controls[t], W[t + 1])
+    assert f.belief_status == "tracking"
+    off_maps = W[0] + 50.0 * W.std(axis=0)
+    beliefs = []
+    for t, touch in enumerate([False] * 30 + [True, True, False, True]):
+        f.step(controls[64 + t], off_maps, contact=("city",) if touch else False)
+        beliefs.append(f.belief_status)
+    assert beliefs[29:] == ["doubtful"] * 4 + ["lost"], beliefs
+    f, W, controls = _tracking(localizer, drive, free_space)
+    for t in range(64, 94):
+        f.step(controls[t], off_maps)
+    f.step(controls[94], off_maps, contact=("city",))
+    for t in range(95, 96 + REPEAT_CONTACT_STEPS):
+        f.step(controls[t], off_maps)
+    f.step(controls[96 + REPEAT_CONTACT_STEPS], off_maps, contact=("city",))
+    assert f.belief_status == "doubtful"  # the second contact came too late
 
 
 class Behind:
