@@ -283,7 +283,8 @@ class BeliefFilter(RecoveryMixin):
         turned the robot); with ``free_space``, a contact with the city where the map has
         room around the belief makes it "lost" for ``CONTACT_LOST_STEPS`` steps; so does,
         with or without a map, a second contact with the city within
-        ``REPEAT_CONTACT_STEPS`` while not "tracking" (:mod:`~localization.filtering.map_contact`); ``bearing`` (rad from the heading,
+        ``REPEAT_CONTACT_STEPS`` while not "tracking"
+        (:mod:`~localization.filtering.map_contact`); ``bearing`` (rad from the heading,
         ``info["collision_bearing"]``; None or NaN: unknown) says where the robot was
         touched, so that only the map at that side of the belief explains the contact.
 
@@ -356,8 +357,8 @@ class BeliefFilter(RecoveryMixin):
         on tuning city 13, seed 3000010 kidnapped, a restart 2.6 m off whose images all fell
         off the maps stayed "relocalizing" for 270 steps and drove into a kiosk 30 times);
         "doubtful" after those misses while P is still narrow (coasting on F through views
-        off the maps) or on a step whose image alone
-        contradicts the belief (the monitor's ``doubt_nis``); else "tracking"."""
+        off the maps) or on a step whose image alone contradicts the belief (the monitor's
+        ``doubt_nis``); else "tracking"."""
         if status == "relocalized":
             return
         if status == "reverted":

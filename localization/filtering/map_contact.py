@@ -14,8 +14,10 @@ A robot knows its map (the city's buildings) and feels a contact (a bumper,
 cannot have happened where the belief says the robot is: the belief is wrong, though it may
 still say "doubtful" (coasting with a narrow P) and steer on into the wall.
 :class:`~localization.filtering.belief.BeliefFilter` calls the belief "lost" for ``CONTACT_LOST_STEPS`` steps after such a contact (an agent stops
-and looks), then lets it drive on. Numpy only: the map is a callable, e.g.
-``env.unwrapped.city.free_mask``.
+and looks), then lets it drive on; a restart still on trial too. A belief that is not
+"tracking" and bumps into the city again within ``REPEAT_CONTACT_STEPS`` is "lost" the same
+way, map or no map (an agent that bumps, backs off and bumps again is not where its coasting
+belief says). Numpy only: the map is a callable, e.g. ``env.unwrapped.city.free_mask``.
 
 Where it was touched matters too (``info["collision_bearing"]``, a ring bumper's reading):
 a robot touched ahead needs a wall ahead, so a wall beside or behind a belief no longer
@@ -44,8 +46,8 @@ from localization.geometry import Array, wrap_angle
 
 __all__ = ["CONTACT_CLEARANCE", "CONTACT_GRID", "CONTACT_KINDS", "CONTACT_LOST_STEPS",
            "CONTACT_MISS", "CONTACT_MOTIONS", "CONTACT_SLACK", "CONTACT_WEIGHT",
-           "PUSH_SPEED", "PUSH_TURN_RATE", "REPEAT_CONTACT_STEPS", "ROBOT_RADIUS", "Contact", "FreeSpace",
-           "blocked_motion", "check_bearing", "check_free_space", "contact_contradicts",
+           "PUSH_SPEED", "PUSH_TURN_RATE", "REPEAT_CONTACT_STEPS", "ROBOT_RADIUS", "Contact",
+           "FreeSpace", "blocked_motion", "check_bearing", "check_free_space", "contact_contradicts",
            "contact_kinds", "contact_log_likelihood", "contact_points", "weigh_contact"]
 
 #: ``free_space(points (n, 2), margin) -> (n,) bool``: whether a disc of radius ``margin`` (m)
