@@ -48,7 +48,8 @@ __all__ = ["CONTACT_CLEARANCE", "CONTACT_GRID", "CONTACT_KINDS", "CONTACT_LOST_S
            "CONTACT_MISS", "CONTACT_MOTIONS", "CONTACT_SLACK", "CONTACT_WEIGHT",
            "PUSH_SPEED", "PUSH_TURN_RATE", "REPEAT_CONTACT_STEPS", "ROBOT_RADIUS", "Contact",
            "FreeSpace", "blocked_motion", "check_bearing", "check_free_space", "contact_contradicts",
-           "contact_kinds", "contact_log_likelihood", "contact_points", "weigh_contact"]
+           "contact_kinds", "contact_log_likelihood", "contact_points", "touched_points",
+           "weigh_contact"]
 
 #: ``free_space(points (n, 2), margin) -> (n,) bool``: whether a disc of radius ``margin`` (m)
 #: around each point is free of buildings (``City.free_mask``)
@@ -192,14 +193,7 @@ def contact_log_likelihood(free_space: FreeSpace, X: Array, bearing: float | Non
     or without a bearing within ``CONTACT_CLEARANCE`` of the position), ``log
     CONTACT_MISS`` where it has room (MCL's bumper model: a particle in the open that feels
     a bump is unlikely, not impossible)."""
-    X = np.asarray(X, dtype=np.float64)
-    if bearing is None or not np.isfinite(bearing):
-        free = _free(free_space, X[:, :2], CONTACT_CLEARANCE)
-    else:
-        angle = X[:, 2] + bearing
-        touched = X[:, :2] + ROBOT_RADIUS * np.stack([np.cos(angle), np.sin(angle)], -1)
-        free = _free(free_space, touched, CONTACT_SLACK)
-    return np.where(free, np.log(CONTACT_MISS), 0.0)
+    return np.where(_explained(free_space, X, bearing), 0.0, np.log(CONTACT_MISS))
 
 
 def weigh_contact(free_space: FreeSpace, X: Array, log_weights: Array,
@@ -207,10 +201,25 @@ def weigh_contact(free_space: FreeSpace, X: Array, log_weights: Array,
     """A contact with the city against particles ``X`` (N, 3) of ``log_weights`` (N,):
     its :func:`contact_log_likelihood` (N,), and whether it contradicts the belief (more
     than ``CONTACT_WEIGHT`` of the weight where the map has room)."""
-    log_B = contact_log_likelihood(free_space, X, bearing)
-    explained = log_weights[log_B == 0.0]
-    share = float(np.exp(logsumexp(explained))) if explained.size else 0.0
-    return log_B, share < 1.0 - CONTACT_WEIGHT
+    explained = _explained(free_space, X, bearing)
+    share = float(np.exp(logsumexp(log_weights[explained]))) if explained.any() else 0.0
+    return np.where(explained, 0.0, np.log(CONTACT_MISS)), share < 1.0 - CONTACT_WEIGHT
+
+
+def _explained(free_space: FreeSpace, X: Array, bearing: float | None) -> Array:
+    """(N,) bool: whether the map explains a contact with the city at each pose of ``X``
+    (:func:`contact_log_likelihood`)."""
+    X = np.asarray(X, dtype=np.float64)
+    if bearing is None or not np.isfinite(bearing):
+        return ~_free(free_space, X[:, :2], CONTACT_CLEARANCE)
+    return ~_free(free_space, touched_points(X, bearing), CONTACT_SLACK)
+
+
+def touched_points(X: Array, bearing: float) -> Array:
+    """Where robots at poses ``X`` (n, 3) are touched at ``bearing`` (rad from the
+    heading): ``p + ROBOT_RADIUS [cos(th + bearing), sin(th + bearing)]`` (n, 2)."""
+    angle = X[:, 2] + bearing
+    return X[:, :2] + ROBOT_RADIUS * np.stack([np.cos(angle), np.sin(angle)], -1)
 
 
 def contact_points(x: Array, P: Array, bearing: float, n: int = CONTACT_GRID
@@ -231,9 +240,7 @@ def contact_points(x: Array, P: Array, bearing: float, n: int = CONTACT_GRID
     t = np.linspace(-1.0, 1.0, n)
     grid = np.stack(np.meshgrid(t, t, t), -1).reshape(-1, 3)
     grid = grid[np.einsum("ij,ij->i", grid, grid) <= 1.0 + 1e-9]
-    poses = x + 2.0 * grid @ L.T
-    angle = poses[:, 2] + bearing
-    points = poses[:, :2] + ROBOT_RADIUS * np.stack([np.cos(angle), np.sin(angle)], -1)
+    points = touched_points(x + 2.0 * grid @ L.T, bearing)
     reach = float(np.sqrt(max(np.linalg.eigvalsh(P[:2, :2])[-1], 0.0))
                   + ROBOT_RADIUS * np.sqrt(max(P[2, 2], 0.0)))
     return points, float(np.sqrt(3.0) / 2.0 * 4.0 / (n - 1) * reach)
@@ -251,7 +258,7 @@ def check_bearing(bearing: object, name: str = "bearing") -> float | None:
 
 def _free(free_space: FreeSpace, points: Array, margin: float) -> Array:
     """``free_space(points, margin)``, checked to return one bool per point."""
-    free = np.asarray(free_space(points, margin))
+    free = np.asarray(free_space(points, margin), dtype=bool)
     if free.shape != (len(points),):
         raise ValueError(f"free_space must return one bool per point, got shape {free.shape}")
     return free

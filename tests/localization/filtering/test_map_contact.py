@@ -19,6 +19,7 @@ from localization.filtering.map_contact import (
     contact_contradicts,
     contact_kinds,
     contact_points,
+    touched_points,
 )
 
 X = np.array([1.0, 2.0, 0.3])
@@ -125,6 +126,13 @@ def test_the_contact_likelihood_of_particles_asks_the_map_at_their_touched_point
                                [0.0, 0.0, np.log(CONTACT_MISS)])
     np.testing.assert_allclose(contact_log_likelihood(wall, X, np.nan),
                                contact_log_likelihood(wall, X))
+
+
+def test_the_touched_point_is_on_the_robots_rim_at_the_bearing() -> None:
+    np.testing.assert_allclose(touched_points(X[None], 0.0)[0],
+                               X[:2] + ROBOT_RADIUS * np.array([np.cos(0.3), np.sin(0.3)]))
+    np.testing.assert_allclose(touched_points(X[None], np.pi / 2)[0],
+                               X[:2] + ROBOT_RADIUS * np.array([-np.sin(0.3), np.cos(0.3)]))
 
 
 def test_bad_bearings_are_named() -> None:
