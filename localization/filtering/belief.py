@@ -56,6 +56,7 @@ from localization.filtering.map_contact import (
     contact_contradicts,
     contact_kinds,
 )
+from localization.filtering.particle_start import DEFAULT_P0
 from localization.filtering.recorded_run import run_recorded
 from localization.filtering.restart_trial import CONFIRM_STEPS, RestartTrial, ViewOdometer
 from localization.geometry import Array
@@ -256,8 +257,9 @@ class BeliefFilter(RecoveryMixin):
             raise ValueError("mode='global' starts from an unknown pose: do not pass x0")
         self.last_update, self._trial, self._refused = None, None, None
         self.belief_status = "tracking"
+        self._since_contact = REPEAT_CONTACT_STEPS + 1  # a new episode: no bump before
         if x0 is not None:
-            self._start(x0, P0 if P0 is not None else np.diag([0.01, 0.01, 0.001]))
+            self._start(x0, P0 if P0 is not None else DEFAULT_P0.copy())
             return "initial"
         if mode == "image" and self._from_image(np.asarray(w, dtype=np.float64)):
             return "initial"

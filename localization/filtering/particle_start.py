@@ -17,8 +17,9 @@ __all__ = ["DEFAULT_P0", "SampleFree", "free_particles", "gaussian_particles"]
 
 #: ``sample_free(n, rng) -> (n, 3)``: free poses (e.g. :func:`~.free_space.city_sampler`)
 SampleFree = Callable[[int, np.random.Generator], ArrayLike]
-#: covariance of a start around a known pose when none is given
+#: covariance of a start around a known pose when none is given (the EKF's too)
 DEFAULT_P0 = np.diag([0.01, 0.01, 0.001])
+DEFAULT_P0.setflags(write=False)
 
 
 def gaussian_particles(x0: ArrayLike, P0: ArrayLike | None, n: int,

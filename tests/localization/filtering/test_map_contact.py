@@ -232,6 +232,29 @@ def test_a_second_bump_soon_after_makes_a_coasting_belief_lost(localizer, drive,
     assert f.belief_status == "doubtful"  # the second contact came too late
 
 
+def test_a_new_episode_forgets_the_last_ones_contacts(localizer, drive):
+    """reset() starts the contact history afresh: a bump at the end of one episode and one
+    early in the next are not "a second bump" (without the reset, they are)."""
+    from localization.filtering.belief import BeliefFilter
+    from tests.localization.conftest import make_env
+
+    images, _, controls = drive
+    W = localizer.transform(images)
+    env = make_env()
+    statuses = []
+    for new_episode in (True, False):
+        f = BeliefFilter(localizer, env.unwrapped.motion_model, free_space=Map(False))
+        f.reset(W[0])
+        f.step(controls[0], W[1], contact=("city",))
+        if new_episode:
+            f.reset(W[0])
+        f.step(controls[1], W[2])
+        f.step(controls[2], W[3], contact=("city",))
+        statuses.append(f.belief_status)
+    env.close()
+    assert statuses[0] != "lost" and statuses[1] == "lost", statuses
+
+
 class Behind:
     """A wall 0.3 m behind wherever the belief ``f`` is (0.1 m from the robot's rim)."""
 
