@@ -53,7 +53,8 @@ class DistrictLikelihood:
     """:class:`ParticleLikelihood` of each district, each particle weighed by its own.
 
     ``measure(w)`` returns the image's features w themselves (the measurement depends on
-    the district); ``distances(w, X)`` measures per district.
+    the district), or NaN when no district's maps have a measurement of it;
+    ``distances(w, X)`` measures per district.
     """
 
     def __init__(self, localizer: Any, measurement: str, alpha: Array,
@@ -68,8 +69,16 @@ class DistrictLikelihood:
         self.R, self.gate = self.parts[0].R, self.parts[0].gate
 
     def measure(self, w: Array) -> Array:
-        """The features w (K m,): each district measures its own block."""
-        return np.asarray(w, dtype=np.float64)
+        """The features w (K m,): each district measures its own block. NaN (K m,) when
+        the image lies outside every district's training domain (an occluded or unfamiliar
+        view): as one map's NaN measurement, the belief keeps its weights, where a floor
+        likelihood at every particle would read as a kidnap."""
+        w = np.asarray(w, dtype=np.float64)
+        views = self.localizer.views_
+        if any(np.all(np.isfinite(part.measure(view.select(w))))
+               for part, view in zip(self.parts, views, strict=True)):
+            return w
+        return np.full_like(w, np.nan)
 
     def distances(self, w: Array, X: Any) -> Array:
         """Squared Mahalanobis distances d2 (N,) of the image at the particles ``X`` (N, 3),

@@ -146,6 +146,24 @@ def test_particles_weigh_every_particle_by_the_image_s_look(exp, test_set):
     env.close()
 
 
+def test_particles_keep_their_weights_on_an_image_off_every_look(exp, test_set):
+    """An image no look has a measurement of (an occluded view) leaves the particles as they
+    were: before, every particle got the floor likelihood, Augmented MCL read it as a
+    kidnap, and the belief went "lost" and seeded particles from the unfamiliar view."""
+    env = make_env()
+    poses, day, _ = test_set
+    belief = ParticleBelief(exp, env.unwrapped.motion_model, n_particles=200, seed=0)
+    belief.reset(exp.transform(day[:1])[0], x0=poses[0])
+    w = exp.transform(np.zeros_like(day[:1]))[0]  # a black frame
+    assert np.all(np.isinf(exp.novelties(w)))  # off every look's domain
+    for _ in range(15):
+        likelihood, status = belief.step([0.0, 0.0], w)
+        assert np.isnan(likelihood) and status == "out_of_domain"
+        assert belief.injected == 0
+    assert np.linalg.norm(belief.pose_mean[:2] - poses[0][:2]) < 0.5
+    env.close()
+
+
 def test_save_and_load_give_the_same_belief(exp, tmp_path):
     env = make_env()
     exp.save(tmp_path / "looks.npz")
