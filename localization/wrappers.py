@@ -270,10 +270,6 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         if isinstance(self.belief, ParticleBelief) and seed is not None and not self._seeded:
             self.belief.rng = np.random.default_rng([seed, 0x5EED])
         status = self.belief.reset(w, mode=localize)
-        if isinstance(self.belief, BeliefFilter):
-            self.belief_status = self.belief.belief_status  # a start from one image: relocalizing
-        else:
-            self.belief_status = "relocalizing" if localize == "global" else "tracking"
         self._publish(info, np.nan, status)
         return self.observation(obs), info
 
@@ -309,10 +305,7 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
 
     def _publish(self, info: dict[str, Any], nis: float, status: str) -> None:
         self.mean, self.cov = self.belief.x, self.belief.P
-        if isinstance(self.belief, BeliefFilter):
-            self.belief_status = self.belief.belief_status
-        elif status not in ("initial", "out_of_domain"):  # else: as it was
-            self.belief_status = status
+        self.belief_status = self.belief.belief_status
         info["nis"] = float(nis)
         info["nis_dof"] = self._dof
         info["measurement_status"] = status

@@ -41,6 +41,7 @@ from localization._validation import check_choice, check_int, check_real
 from localization.filtering._modes import Mode, find_modes
 from localization.filtering._particle_state import ParticleStateMixin
 from localization.filtering.augmented_mcl import LikelihoodAverages
+from localization.filtering.belief import LOST_AFTER_MISSES
 from localization.filtering.district_particles import check_measurement_noise, image_models
 from localization.filtering.map_contact import (
     CONTACT_LOST_STEPS,
@@ -74,6 +75,10 @@ RESET_MODES = ("image", "global")
 #: "relocalizing": Augmented MCL injected particles this step; "ambiguous": the dominant mode holds less
 #: than ``confident_weight``, or no image has confirmed it since the particles were seeded
 #: from images (``confirm_share``); "tracking": otherwise.
+#: ``belief_status`` is what an agent steers by: the step's status, except on an image with no
+#: measurement, where the belief coasts (:meth:`ParticleBelief._coast_status`): "lost" as
+#: above, "ambiguous" while the dominant mode is light or unconfirmed, "doubtful" from the
+#: ``LOST_AFTER_MISSES``-th such step in a row (as the EKF's), else as it was.
 PARTICLE_STATUSES = ("initial", "tracking", "ambiguous", "doubtful", "relocalizing", "lost",
                      "out_of_domain")
 
@@ -216,7 +221,8 @@ class ParticleBelief(ParticleStateMixin):
         self.particles: Array | None = None
         self.log_weights: Array | None = None
         self.modes: list[Mode] = []
-        self.status = "initial"
+        self.status = self.belief_status = "initial"
+        self._misses = 0  # steps in a row whose image had no measurement
         self.injected = 0
         self._recovering = False  # Augmented MCL injected this step
         self._fresh = np.zeros(0, dtype=bool)  # particles injected at the last step
@@ -275,6 +281,8 @@ class ParticleBelief(ParticleStateMixin):
             self.tracker.reset(w, self.modes[0], known=x0 is not None)
         self.amcl.reset()
         self.status, self.injected, self._recovering, self._bumped = "initial", 0, False, 0
+        self.belief_status = "relocalizing" if mode == "global" and x0 is None else "tracking"
+        self._misses = 0
         self.confirmation.reset(x0 is not None)
         self._confirm(w)
         self._fresh = np.zeros(self.n_particles, dtype=bool)
@@ -328,6 +336,8 @@ class ParticleBelief(ParticleStateMixin):
         if not np.all(np.isfinite(z)):
             self._set(self.particles, self.log_weights + log_B)
             self.status = "lost" if self._bumped else "out_of_domain"
+            self._misses += 1
+            self.belief_status = self._coast_status()
             self._track(u, w, contact)
             return np.nan, self.status
         log_L = self.likelihood.log_likelihood(z, self.particles) + log_B
@@ -350,6 +360,7 @@ class ParticleBelief(ParticleStateMixin):
         self._confirm(w)
         self.status = self._status(w_avg)
         self._track(u, w, contact)
+        self._misses, self.belief_status = 0, self.status
         return w_avg, self.status
 
     def _bump(self, kinds: frozenset[str], bearing: float | None) -> Array | float:
@@ -403,6 +414,17 @@ class ParticleBelief(ParticleStateMixin):
         if self.modes[0].weight < self.confident_weight or not self.confirmed:
             return "ambiguous"
         return "tracking"
+
+    def _coast_status(self) -> str:
+        """The belief's status on a step whose image had no measurement (an occluded or
+        unfamiliar view: the particles only moved): see ``PARTICLE_STATUSES``."""
+        if self._bumped or self.amcl.w_fast < self.lost_ratio * self.amcl.w_slow:
+            return "lost"
+        if self.modes[0].weight < self.confident_weight or not self.confirmed:
+            return "ambiguous"
+        if self._misses >= LOST_AFTER_MISSES and self.belief_status == "tracking":
+            return "doubtful"
+        return self.belief_status
 
     def run(self, W: ArrayLike, controls: ArrayLike, x0: ArrayLike | None = None,
             P0: ArrayLike | None = None, mode: str = "image",

@@ -188,6 +188,32 @@ def test_without_a_map_or_with_traffic_a_contact_weighs_nothing(localizer, featu
 
 
 # ---------------------------------------------------------------- modes
+def test_a_belief_coasting_on_images_without_a_measurement_says_so(localizer, features,
+                                                                   drive):
+    """Images with no measurement (an occluded or unfamiliar view) only move the particles:
+    the belief keeps "tracking" for LOST_AFTER_MISSES - 1 such steps, is "doubtful" from the
+    next (as the EKF), "ambiguous" once its dominant mode is light, and an image with a
+    measurement gives it the step's status again. Before, it said "tracking" throughout."""
+    from localization.filtering.belief import LOST_AFTER_MISSES
+
+    W, poses, _ = features
+    black = localizer.transform(np.zeros_like(drive[0][:1]))[0]
+    assert not np.all(np.isfinite(localizer.measure(black, "representation")))
+    pf = _belief(localizer, max_injection=0.0, track_mode=False)
+    pf.reset(W[0], x0=poses[0])
+    assert pf.belief_status == "tracking"
+    coasting = []
+    for _ in range(LOST_AFTER_MISSES + 1):
+        assert pf.step([0.0, 0.0], black)[1] == "out_of_domain"
+        coasting.append(pf.belief_status)
+    assert coasting == ["tracking"] * (LOST_AFTER_MISSES - 1) + ["doubtful"] * 2
+    pf.particles[::2] += [3.0, 0.0, 0.0]  # two hypotheses of equal weight
+    pf.step([0.0, 0.0], black)
+    assert pf.belief_status == "ambiguous"
+    _, status = pf.step([0.0, 0.0], W[0])
+    assert pf.belief_status == status != "out_of_domain"
+
+
 def test_dominant_mode_summary_of_two_modes_is_the_heavier_one(localizer, features):
     rng = np.random.default_rng(0)
     a, b = np.array([1.0, 2.0, 0.5]), np.array([7.0, 2.0, 0.5])
