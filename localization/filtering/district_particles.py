@@ -7,7 +7,8 @@ the image resembles): the image's measurement by that district's maps at the par
 pose-equivalent R the districts share ("pose", "representation"), so the distances of
 particles in different districts are on one scale. An image proposes psi* and the
 retrieved training poses of every district whose psi* lies in its own region: look-alike
-places in several districts all get particles, and the next images decide.
+places in several districts all get particles, and the next images decide. An image no
+district has a measurement of has none, as with one map (the belief keeps its weights).
 """
 
 from __future__ import annotations
