@@ -404,23 +404,31 @@ class ParticleBelief(ParticleStateMixin):
         c.update(self._proposals.agreement(w, self.modes[0].mean, self.mode_radius,
                                            self.heading_scale))
 
+    def _lost(self) -> bool:
+        """After a contradicting contact, or while ``w_fast < lost_ratio w_slow``."""
+        return bool(self._bumped) or self.amcl.w_fast < self.lost_ratio * self.amcl.w_slow
+
+    def _ambiguous(self) -> bool:
+        """The dominant mode holds less than ``confident_weight``, or no image confirmed it."""
+        return self.modes[0].weight < self.confident_weight or not self.confirmed
+
     def _status(self, w_avg: float) -> str:
-        if self._bumped or self.amcl.w_fast < self.lost_ratio * self.amcl.w_slow:
+        if self._lost():
             return "lost"
         if self._recovering:
             return "relocalizing"
         if w_avg < self.doubt_ratio * self.amcl.w_slow:
             return "doubtful"
-        if self.modes[0].weight < self.confident_weight or not self.confirmed:
+        if self._ambiguous():
             return "ambiguous"
         return "tracking"
 
     def _coast_status(self) -> str:
         """The belief's status on a step whose image had no measurement (an occluded or
         unfamiliar view: the particles only moved): see ``PARTICLE_STATUSES``."""
-        if self._bumped or self.amcl.w_fast < self.lost_ratio * self.amcl.w_slow:
+        if self._lost():
             return "lost"
-        if self.modes[0].weight < self.confident_weight or not self.confirmed:
+        if self._ambiguous():
             return "ambiguous"
         if self._misses >= LOST_AFTER_MISSES and self.belief_status == "tracking":
             return "doubtful"
