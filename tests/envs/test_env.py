@@ -198,6 +198,30 @@ def test_a_shove_by_a_vehicle_cannot_flip_the_robot():
     e.close()
 
 
+def test_a_robot_shoved_into_a_wall_drives_out_of_it():
+    """The pose a vehicle's shove left a robot in (held-out city 21, robustness traffic seed
+    3000034): leaning 19 degrees on a building, a wheel wedged into the corner of the wall and
+    the ground. On walls with the wheels' rubber friction it stayed there whatever it was told
+    (350 steps); on smooth walls (``envs.city_model.SMOOTH_WALL``) it drives out."""
+    e = gym.make("AppearanceNav-v0", scene_seed=17, image_size=(16, 16), motion_noise=0.0)
+    base = e.unwrapped
+    e.reset(seed=0)
+    city, model = base.city, base.model
+    for b in city.buildings:  # an east face with street in front of it
+        x, y = b.center[0] + b.half_size[0] + 0.1175, b.center[1]
+        if all(city.is_free(x + 0.5, y + dy) for dy in (-0.4, 0.0, 0.4)):
+            break
+    a = base._root_qpos
+    base.data.qpos[a:a + 7] = [x, y, 0.0427, -0.6947, 0.1316, 0.1045, -0.6994]  # heading north
+    base.data.qvel[:] = 0.0
+    mujoco.mj_forward(model, base.data)
+    assert base.tilt > 0.3 and e.step([0.0, 0.0])[4]["collision_with"] == ("city",)
+    for _ in range(60):
+        info = e.step([0.3, 0.0])[4]
+    assert np.hypot(info["pose"][0] - x, info["pose"][1] - y) > 0.5  # 1.04 m when written
+    e.close()
+
+
 def test_upright_torque_acts_only_past_the_upright_tilt():
     from envs.upright import UPRIGHT_TILT, upright_torque
 
