@@ -7,8 +7,9 @@ unpickles parts of the model on load, so policies are saved here as a torch stat
 (``<path>.json``): :func:`save_policy`, :func:`load_policy`. :class:`PPOAgent` acts with a
 loaded policy on pose-belief observations, with the same ``act(obs)`` interface as
 :class:`agents.scripted.ScriptedAgent` (``act(obs, info)`` for a policy that sees the belief
-status). ``policy.json`` records the observation settings (``lookaheads``, ``status``); a file
-without ``status`` (written before it existed) is a policy without the status.
+status or the bumper). ``policy.json`` records the observation settings (``lookaheads``,
+``status``, ``bumper``); a file without ``status`` or ``bumper`` (written before they existed)
+is a policy without them.
 """
 
 from __future__ import annotations
@@ -54,15 +55,17 @@ def make_ppo(env: gym.Env | Any, seed: int = 0, **overrides: Any) -> PPO:
 
 
 def save_policy(model: PPO, path: str | Path, lookaheads: tuple[float, ...] = (0.5, 1.0, 2.0),
-                status: bool = False, **meta: Any) -> Path:
+                status: bool = False, bumper: bool = False, **meta: Any) -> Path:
     """Write ``<path>.pt`` (policy state dict) and ``<path>.json`` (settings: the observation's
-    ``lookaheads`` and ``status``, see :class:`NavigationFeatures`); return the .pt path."""
+    ``lookaheads``, ``status`` and ``bumper``, see :class:`NavigationFeatures`); return the .pt
+    path."""
     path = _check_path(path).with_suffix("")
-    status = check_bool(status, "status")
+    status, bumper = check_bool(status, "status"), check_bool(bumper, "bumper")
     path.parent.mkdir(parents=True, exist_ok=True)
     torch.save(model.policy.state_dict(), path.with_suffix(".pt"))
     settings = {"format": FORMAT, "policy_kwargs": model.policy_kwargs,
-                "lookaheads": list(lookaheads), "status": status, "meta": meta}
+                "lookaheads": list(lookaheads), "status": status, "bumper": bumper,
+                "meta": meta}
     path.with_suffix(".json").write_text(json.dumps(settings, indent=2, default=str))
     return path.with_suffix(".pt")
 
@@ -83,7 +86,8 @@ def load_policy(path: str | Path) -> tuple[MultiInputActorCriticPolicy, dict[str
         if not f.is_file():
             raise FileNotFoundError(f"no saved PPO policy file {f}")
     settings = _read_settings(settings_file)
-    space = NavigationFeatures.space(tuple(settings["lookaheads"]), settings["status"])
+    space = NavigationFeatures.space(tuple(settings["lookaheads"]), settings["status"],
+                                     settings["bumper"])
     try:
         policy = MultiInputActorCriticPolicy(space, ACTION_SPACE, lambda _: 0.0,
                                              **settings["policy_kwargs"])
@@ -128,10 +132,11 @@ def _read_settings(settings_file: Path) -> dict[str, Any]:
     if len(lookaheads) == 0 or np.any(lookaheads <= 0):
         raise ValueError(f"{settings_file}: lookaheads must be positive distances, "
                          f"got {settings['lookaheads']}")
-    settings.setdefault("status", False)  # files from before the status observation
-    if not isinstance(settings["status"], bool):
-        raise ValueError(f"{settings_file}: status must be true or false, "  # noqa: TRY004  (a bad file is a bad value)
-                         f"got {settings['status']!r}")
+    for key in ("status", "bumper"):
+        settings.setdefault(key, False)  # files from before the status / bumper observation
+        if not isinstance(settings[key], bool):
+            raise ValueError(f"{settings_file}: {key} must be true or false, "  # noqa: TRY004  (a bad file is a bad value)
+                             f"got {settings[key]!r}")
     return settings
 
 
@@ -163,13 +168,15 @@ class PPOAgent:
     lookaheads : tuple of float — must match the training wrapper's.
     deterministic : bool — act with the mean action (True) or sample.
     status : bool — the policy sees the belief status (must match the training wrapper's).
+    bumper : bool — the policy feels the bump sensor (must match the training wrapper's).
     """
 
     def __init__(self, policy: MultiInputActorCriticPolicy, city: Any,
                  lookaheads: tuple[float, ...] = (0.5, 1.0, 2.0),
-                 deterministic: bool = True, status: bool = False) -> None:
+                 deterministic: bool = True, status: bool = False,
+                 bumper: bool = False) -> None:
         self.policy = policy
-        self.features = NavigationFeatures(city, lookaheads, status=status)
+        self.features = NavigationFeatures(city, lookaheads, status=status, bumper=bumper)
         if policy.observation_space != self.features.observation_space:
             raise ValueError("the policy was trained on another observation space: "
                              f"{policy.observation_space} != {self.features.observation_space}")
@@ -180,17 +187,18 @@ class PPOAgent:
         """Load a policy saved by :func:`save_policy`."""
         policy, settings = load_policy(path)
         return cls(policy, city, tuple(settings["lookaheads"]), deterministic,
-                   settings["status"])
+                   settings["status"], settings["bumper"])
 
     def reset(self) -> None:
-        """Forget the plan (call between episodes)."""
+        """Forget the plan and the last contact (call between episodes)."""
         self.features.reset()
 
     def act(self, obs: Mapping[str, Any], info: Mapping[str, Any] | None = None,
             ) -> NDArray[np.float32]:
         """The action U = [v, w] for one belief observation (``info``: the step's, for its
-        ``belief_status``; None or without it: "tracking")."""
+        ``belief_status``, None or without it: "tracking"; and its ``collision`` and
+        ``collision_bearing`` for a policy with the bumper). Call once per env step."""
         status = None if info is None else info.get("belief_status")
-        action, _ = self.policy.predict(self.features(obs, status),
+        action, _ = self.policy.predict(self.features(obs, status, info),
                                         deterministic=self.deterministic)
         return np.asarray(action, dtype=np.float32)

@@ -67,6 +67,9 @@ class TrainConfig(AgentEnvSettings):
     status: bool = field(default=False, metadata={
         "help": "the policy also sees the belief status (tracking, ambiguous, doubtful, lost, "
                 "relocalizing) one-hot"})
+    bumper: bool = field(default=False, metadata={
+        "help": "the policy also feels the bump sensor (info['collision'] and where it was "
+                "touched, with a few steps' memory: agents.observations)"})
     kidnap_at: str = field(default="", metadata={
         "help": "comma-separated steps of each training episode that start with a kidnap "
                 "(empty: none)"})
@@ -122,18 +125,20 @@ class ProgressBar(BaseCallback):
 
 
 class PolicyCheckpoint(BaseCallback):
-    """Save the policy (no pickle) every ``freq`` environment steps (``status``: its
-    observation has the belief status, see :func:`agents.ppo.save_policy`)."""
+    """Save the policy (no pickle) every ``freq`` environment steps (``status``, ``bumper``:
+    its observation has the belief status, the bumper; see :func:`agents.ppo.save_policy`)."""
 
-    def __init__(self, folder: Path, freq: int, status: bool = False) -> None:
+    def __init__(self, folder: Path, freq: int, status: bool = False,
+                 bumper: bool = False) -> None:
         super().__init__()
-        self.folder, self.freq, self.last, self.status = folder, freq, 0, status
+        self.folder, self.freq, self.last = folder, freq, 0
+        self.status, self.bumper = status, bumper
 
     def _on_step(self) -> bool:
         if self.num_timesteps - self.last >= self.freq:
             self.last = self.num_timesteps
             save_policy(self.model, self.folder / f"policy_{self.num_timesteps}",
-                        status=self.status)
+                        status=self.status, bumper=self.bumper)
         return True
 
 
@@ -153,7 +158,7 @@ def make_vec_env(args: TrainConfig, localizer: AppearanceLocalizer | None, n: in
                             **city_options(args.pose_source,
                                            args.allow_other_city or not check_city))
         reward = StreetProgressReward(env, uncertainty_penalty=args.uncertainty_penalty)
-        return Monitor(NavigationObservation(reward, status=args.status))
+        return Monitor(NavigationObservation(reward, status=args.status, bumper=args.bumper))
     if kind not in VEC_ENVS:
         raise ValueError(f"unknown vec_env {kind!r}; choose one of {VEC_ENVS}")
     venv = SubprocVecEnv([make] * n, start_method="fork") if kind == "subproc" \
@@ -186,11 +191,11 @@ def train_agent(args: TrainConfig) -> dict:
                               log_path=str(out), deterministic=True, verbose=0)
     callbacks = CallbackList([ProgressBar(args.total_timesteps, args.progress), evaluation,
                               PolicyCheckpoint(out / "checkpoints", args.checkpoint_freq,
-                                               args.status)])
+                                               args.status, args.bumper)])
     t0 = time.perf_counter()
     model.learn(args.total_timesteps, callback=callbacks)
     seconds = time.perf_counter() - t0
-    policy = save_policy(model, out / "policy", status=args.status,
+    policy = save_policy(model, out / "policy", status=args.status, bumper=args.bumper,
                          pose_source=args.pose_source, scene_seed=args.scene_seed,
                          settings=dataclasses.asdict(args))
     successes = getattr(evaluation, "evaluations_successes", [])

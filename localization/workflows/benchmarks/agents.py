@@ -90,6 +90,8 @@ class AgentsBenchConfig:
     seed: int = field(default=0, metadata={"help": "training seed (the same for every policy)"})
     status: bool = field(default=True, metadata={
         "help": "the belief policies see the belief status"})
+    bumper: bool = field(default=True, metadata={
+        "help": "every policy feels the bump sensor (agents.observations)"})
     train_kidnap_at: str = field(default="100", metadata={
         "help": "comma-separated steps of each belief training episode with a kidnap"})
     detect_divergence: bool = field(default=True, metadata={
@@ -143,7 +145,7 @@ def _train_configs(args: AgentsBenchConfig) -> dict[str, TrainConfig]:
     common = {"scene_seed": args.train_city, "motion_noise": args.motion_noise,
               "start": "random", "total_timesteps": args.total_timesteps,
               "n_envs": args.n_envs, "vec_env": args.vec_env, "seed": args.seed,
-              "eval_freq": args.eval_freq, "progress": False,
+              "eval_freq": args.eval_freq, "progress": False, "bumper": args.bumper,
               "localizer": str(localizer_path(args.localizers, args.train_city))}
     belief = {**common, "pose_source": "belief", "status": args.status,
               "kidnap_at": args.train_kidnap_at, "detect_divergence": args.detect_divergence}
