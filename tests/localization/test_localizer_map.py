@@ -175,8 +175,10 @@ def _fit(n_train: int):
 
 
 def test_fit_city_localizer_warns_when_under_trained(envs01):
-    # measured: 300 images -> belief RMSE 7.5 m vs dead reckoning 4.1 m, heading factor at 100
-    loc, seconds, warned = _fit(300)
+    # measured: 200 images -> belief RMSE 4.64 m vs dead reckoning 3.60 m (3.93 vs 2.94 before
+    # the walls were smooth). 300 images were the case until then (4.18 vs 1.04 m); on smooth
+    # walls the drives slide along a building where they stuck, and 300 read 3.87 vs 4.25 m
+    loc, seconds, warned = _fit(200)
     assert loc.quality_["ratio"] > 1.0
     assert len(warned) == 1
     message = str(warned[0].message)
