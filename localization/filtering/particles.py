@@ -40,8 +40,8 @@ from sklearn.exceptions import NotFittedError
 from localization._validation import check_choice, check_int, check_real
 from localization.filtering._modes import Mode, find_modes
 from localization.filtering._particle_state import ParticleStateMixin
+from localization.filtering._particle_status import PARTICLE_STATUSES, ParticleStatusMixin
 from localization.filtering.augmented_mcl import LikelihoodAverages
-from localization.filtering.belief import LOST_AFTER_MISSES
 from localization.filtering.district_particles import check_measurement_noise, image_models
 from localization.filtering.map_contact import (
     CONTACT_LOST_STEPS,
@@ -67,23 +67,9 @@ from localization.geometry import Array, wrap_angle
 __all__ = ["PARTICLE_STATUSES", "ParticleBelief"]
 
 RESET_MODES = ("image", "global")
-#: "initial" after reset; "out_of_domain": the image has no measurement (weights kept);
-#: "lost": w_fast < lost_ratio w_slow (the images are far less likely than usual);
-#: "doubtful": this image alone is far less likely than usual (w_avg < doubt_ratio w_slow:
-#: an outlier frame, or the first sign of a kidnap), or (``track_mode``) the reported EKF
-#: holds its pose against most particles;
-#: "relocalizing": Augmented MCL injected particles this step; "ambiguous": the dominant mode holds less
-#: than ``confident_weight``, or no image has confirmed it since the particles were seeded
-#: from images (``confirm_share``); "tracking": otherwise.
-#: ``belief_status`` is what an agent steers by: the step's status, except on an image with no
-#: measurement, where the belief coasts (:meth:`ParticleBelief._coast_status`): "lost" as
-#: above, "ambiguous" while the dominant mode is light or unconfirmed, "doubtful" from the
-#: ``LOST_AFTER_MISSES``-th such step in a row (as the EKF's), else as it was.
-PARTICLE_STATUSES = ("initial", "tracking", "ambiguous", "doubtful", "relocalizing", "lost",
-                     "out_of_domain")
 
 
-class ParticleBelief(ParticleStateMixin):
+class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
     """Particle-filter pose belief fed with image features (see the module docstring).
 
     Parameters
@@ -403,36 +389,6 @@ class ParticleBelief(ParticleStateMixin):
             return  # nothing can withdraw it: skip the retrieval
         c.update(self._proposals.agreement(w, self.modes[0].mean, self.mode_radius,
                                            self.heading_scale))
-
-    def _lost(self) -> bool:
-        """After a contradicting contact, or while ``w_fast < lost_ratio w_slow``."""
-        return bool(self._bumped) or self.amcl.w_fast < self.lost_ratio * self.amcl.w_slow
-
-    def _ambiguous(self) -> bool:
-        """The dominant mode holds less than ``confident_weight``, or no image confirmed it."""
-        return self.modes[0].weight < self.confident_weight or not self.confirmed
-
-    def _status(self, w_avg: float) -> str:
-        if self._lost():
-            return "lost"
-        if self._recovering:
-            return "relocalizing"
-        if w_avg < self.doubt_ratio * self.amcl.w_slow:
-            return "doubtful"
-        if self._ambiguous():
-            return "ambiguous"
-        return "tracking"
-
-    def _coast_status(self) -> str:
-        """The belief's status on a step whose image had no measurement (an occluded or
-        unfamiliar view: the particles only moved): see ``PARTICLE_STATUSES``."""
-        if self._lost():
-            return "lost"
-        if self._ambiguous():
-            return "ambiguous"
-        if self._misses >= LOST_AFTER_MISSES and self.belief_status == "tracking":
-            return "doubtful"
-        return self.belief_status
 
     def run(self, W: ArrayLike, controls: ArrayLike, x0: ArrayLike | None = None,
             P0: ArrayLike | None = None, mode: str = "image",
