@@ -16,7 +16,9 @@ against a vehicle, a contact step predicted as blocked) sees the same picture ag
 again, and a look-alike's psi* agrees with itself every time: on held-out city 31 (stop 34)
 one repeated view confirmed a restart 22 m away, which then stood for 200 steps. A moving
 robot's every step counts (0.045 m at the scripted agent's half speed, 0.05 rad per step of
-its look turns); after ``TRIAL_REPEATS`` repeats the trial fails.
+its look turns); after ``TRIAL_REPEATS`` repeats the trial fails. A contact step predicted as
+blocked adds no odometry (``BeliefFilter._odometry``): its commanded turn is as uncertain as
+it is large, and a robot pinned on a building while its pilot commands a turn sees one view.
 """
 
 from __future__ import annotations

@@ -231,6 +231,35 @@ def test_a_look_alike_seen_again_and_again_does_not_confirm_a_restart(localizer,
     assert np.hypot(*(f.x[:2] - poses[START + n][:2])) < 1.0
 
 
+def test_commanded_turns_while_pinned_do_not_confirm_a_restart(localizer, drive):
+    """A robot pinned against a building while its pilot commands a full turn: each contact
+    step is predicted as blocked with the commanded turn, whose standard deviation is as
+    large as itself, so it is no evidence of a new view. The look-alike seen again and
+    again does not confirm the restart; the belief it replaced comes back after
+    TRIAL_REPEATS (held-out city 31, stop 41: confirmed 22 m off in three steps)."""
+    from localization.filtering.restart_trial import TRIAL_REPEATS, VIEW_TURN
+
+    images, poses, controls = drive
+    W = localizer.transform(images)
+    n = 10
+    f = _tracking(localizer, W, drive, relocalize_after=n)
+    off_map = W[0] + 100.0 * W.std(axis=0)
+    for t in range(START, START + n - 1):
+        f.step(controls[t - 1], off_map)
+    look_alike = W[START + n + 120]
+    assert f.step(controls[START + n - 1], look_alike)[1] == "relocalized"
+    turn = np.array([0.18, 1.0])
+    assert f.motion_model.predict(np.zeros(3), f.gain * turn)[2] >= VIEW_TURN
+    statuses = [f.step(turn, look_alike, contact=("city",))[1] for _ in range(3)]
+    assert "out_of_domain" not in statuses and f._trial is not None
+    assert (f._trial.steps, f._trial.repeats) == (0, 3)  # repeats, not views
+    statuses += [f.step(turn, look_alike, contact=("city",))[1]
+                 for _ in range(TRIAL_REPEATS + 2)]
+    assert statuses.index("reverted") == TRIAL_REPEATS - 1, statuses
+    assert "relocalized" not in statuses, statuses
+    assert np.hypot(*(f.x[:2] - poses[START + n][:2])) < 1.0
+
+
 def test_a_trial_counts_views_from_somewhere_else_only():
     from localization.filtering.restart_trial import (
         CONFIRM_STEPS,
