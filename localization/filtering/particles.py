@@ -244,6 +244,8 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
         ``mode="image"``: every particle from the image's proposals; ``"global"``: a
         ``global_proposal_fraction`` from them, the rest over the free space
         (``sample_free``); with ``x0`` (and ``P0``, default small) a Gaussian around x0.
+        ``belief_status`` is then "tracking" (a given pose), "relocalizing" (a global start)
+        or, from the image alone, "ambiguous" until the images confirm its mode.
 
         Returns
         -------
@@ -267,12 +269,22 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
             self.tracker.reset(w, self.modes[0], known=x0 is not None)
         self.amcl.reset()
         self.status, self.injected, self._recovering, self._bumped = "initial", 0, False, 0
-        self.belief_status = "relocalizing" if mode == "global" and x0 is None else "tracking"
         self._misses = 0
         self.confirmation.reset(x0 is not None)
         self._confirm(w)
+        self.belief_status = self._start_status(mode, x0 is not None)
         self._fresh = np.zeros(self.n_particles, dtype=bool)
         return self.status
+
+    def _start_status(self, mode: str, known: bool) -> str:
+        """``belief_status`` after :meth:`reset`: "tracking" from a given pose, "relocalizing"
+        from a global start, and from the first image as after a step: "ambiguous" while its
+        mode is light or unconfirmed (one image cannot confirm it at ``confirm_steps`` >= 2)."""
+        if known:
+            return "tracking"
+        if mode == "global":
+            return "relocalizing"
+        return "ambiguous" if self._ambiguous() else "tracking"
 
     def predict(self, u: ArrayLike, contact: Contact = False) -> None:
         """Move every particle: ``X_i = F(X_i, k U) + T(yaw_i) e_i``, ``e_i ~ N(0, Q)``; a

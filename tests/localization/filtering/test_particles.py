@@ -77,6 +77,21 @@ def test_all_likelihoods_underflowing_give_no_nan(localizer, features):
     assert np.all(np.isfinite(pf.log_weights)) and pf.weights.sum() == pytest.approx(1.0)
 
 
+def test_a_start_from_one_image_is_ambiguous_until_the_images_confirm_it(localizer, features):
+    """One image's proposals are a guess: with ``confirm_steps`` 2 no single image confirms
+    their mode, so a start from the image alone says "ambiguous" (as a step would), not
+    "tracking"; a given pose is "tracking", a global start "relocalizing"."""
+    W, poses, _ = features
+    pf = _belief(localizer)
+    pf.reset(W[0])
+    assert not pf.confirmed and pf.belief_status == "ambiguous"
+    pf.reset(W[0], x0=poses[0])
+    assert pf.belief_status == "tracking"
+    one = _belief(localizer, confirm_steps=1, confirm_share=0.0, confident_weight=1e-9)
+    one.reset(W[0])
+    assert one.confirmed and one.belief_status == "tracking"  # the rule, not a constant
+
+
 def test_resampling_fires_when_the_effective_sample_size_drops(localizer, features):
     W, poses, controls = features
     calls = []
