@@ -117,7 +117,7 @@ def test_resampling_fires_when_the_effective_sample_size_drops(localizer, featur
 
 def test_a_blocked_contact_holds_the_particles_and_spreads_them_by_the_step(localizer, features):
     """As the EKF's: no translation, the commanded step as one standard deviation."""
-    W, poses, controls = features
+    W, poses, _ = features
     u = np.array([1.0, 0.0])
     moved, held, commanded = (_belief(localizer, contact_motion=m) for m in
                               ("blocked", "blocked", "commanded"))
