@@ -9,7 +9,8 @@ from localization.filtering.belief import LOST_AFTER_MISSES
 
 __all__ = ["PARTICLE_STATUSES", "ParticleStatusMixin"]
 
-#: "initial" after reset; "out_of_domain": the image has no measurement (weights kept);
+#: "initial" after reset (``belief_status`` then: see ``_start_status``); "out_of_domain": the
+#: image has no measurement (weights kept);
 #: "lost": w_fast < lost_ratio w_slow (the images are far less likely than usual);
 #: "doubtful": this image alone is far less likely than usual (w_avg < doubt_ratio w_slow:
 #: an outlier frame, or the first sign of a kidnap), or (``track_mode``) the reported EKF
@@ -48,6 +49,16 @@ class ParticleStatusMixin:
     def _ambiguous(self) -> bool:
         """The dominant mode holds less than ``confident_weight``, or no image confirmed it."""
         return self.modes[0].weight < self.confident_weight or not self.confirmed
+
+    def _start_status(self, mode: str, known: bool) -> str:
+        """``belief_status`` after ``reset``: "tracking" from a given pose, "relocalizing"
+        from a global start, and from the first image as after a step: "ambiguous" while its
+        mode is light or unconfirmed (one image cannot confirm it at ``confirm_steps`` >= 2)."""
+        if known:
+            return "tracking"
+        if mode == "global":
+            return "relocalizing"
+        return "ambiguous" if self._ambiguous() else "tracking"
 
     def _status(self, w_avg: float) -> str:
         if self._lost():

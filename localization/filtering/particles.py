@@ -276,16 +276,6 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
         self._fresh = np.zeros(self.n_particles, dtype=bool)
         return self.status
 
-    def _start_status(self, mode: str, known: bool) -> str:
-        """``belief_status`` after :meth:`reset`: "tracking" from a given pose, "relocalizing"
-        from a global start, and from the first image as after a step: "ambiguous" while its
-        mode is light or unconfirmed (one image cannot confirm it at ``confirm_steps`` >= 2)."""
-        if known:
-            return "tracking"
-        if mode == "global":
-            return "relocalizing"
-        return "ambiguous" if self._ambiguous() else "tracking"
-
     def predict(self, u: ArrayLike, contact: Contact = False) -> None:
         """Move every particle: ``X_i = F(X_i, k U) + T(yaw_i) e_i``, ``e_i ~ N(0, Q)``; a
         ``contact`` step (what was touched: ``info["collision_with"]``, or True) as
