@@ -254,8 +254,8 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
         w = self._check_w(w)
         if mode not in RESET_MODES:
             raise ValueError(f"unknown mode {mode!r}; choose one of {RESET_MODES}")
-        N = self.n_particles
-        if x0 is not None:
+        N, known = self.n_particles, x0 is not None
+        if known:
             X = gaussian_particles(x0, P0, N, self.rng)
         elif mode == "image":
             X = self._jitter(self.proposals(w), N)
@@ -266,13 +266,13 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
                 lambda n: self._jitter(self._proposals.train_poses, n))])
         self._set(X)
         if self.tracker is not None:
-            self.tracker.reset(w, self.modes[0], known=x0 is not None)
+            self.tracker.reset(w, self.modes[0], known=known)
         self.amcl.reset()
         self.status, self.injected, self._recovering, self._bumped = "initial", 0, False, 0
         self._misses = 0
-        self.confirmation.reset(x0 is not None)
+        self.confirmation.reset(known)
         self._confirm(w)
-        self.belief_status = self._start_status(mode, x0 is not None)
+        self.belief_status = self._start_status(mode, known)
         self._fresh = np.zeros(self.n_particles, dtype=bool)
         return self.status
 

@@ -207,6 +207,21 @@ def test_a_relocalization_at_a_look_alike_is_undone(localizer, drive):
     assert np.hypot(*(f.x[:2] - poses[end - 1][:2])) < 0.5
 
 
+def _restarted_at_a_look_alike(localizer, drive, n: int = 10):
+    """A tracking EKF (``relocalize_after=n``) fed ``n - 1`` images off the maps, then
+    restarted at a look-alike view 12 m on. Returns the filter, that view's features and
+    the true pose at the restart."""
+    images, poses, controls = drive
+    W = localizer.transform(images)
+    f = _tracking(localizer, W, drive, relocalize_after=n)
+    off_map = W[0] + 100.0 * W.std(axis=0)
+    for t in range(START, START + n - 1):
+        f.step(controls[t - 1], off_map)
+    look_alike = W[START + n + 120]
+    assert f.step(controls[START + n - 1], look_alike)[1] == "relocalized"
+    return f, look_alike, poses[START + n]
+
+
 def test_a_look_alike_seen_again_and_again_does_not_confirm_a_restart(localizer, drive):
     """The restart's look-alike view, seen again by a robot standing still (zero control),
     agrees with the restart every time; repeated views are not evidence: the restart is
@@ -214,21 +229,13 @@ def test_a_look_alike_seen_again_and_again_does_not_confirm_a_restart(localizer,
     restart is tried again from the same view (stop 34: held-out city 31's stuck robot)."""
     from localization.filtering.restart_trial import TRIAL_REPEATS
 
-    images, poses, controls = drive
-    W = localizer.transform(images)
-    n = 10
-    f = _tracking(localizer, W, drive, relocalize_after=n)
-    off_map = W[0] + 100.0 * W.std(axis=0)
-    for t in range(START, START + n - 1):
-        f.step(controls[t - 1], off_map)
-    look_alike = W[START + n + 120]
-    assert f.step(controls[START + n - 1], look_alike)[1] == "relocalized"
+    f, look_alike, start = _restarted_at_a_look_alike(localizer, drive)
     steps = [f.step(np.zeros(2), look_alike) for _ in range(TRIAL_REPEATS + 30)]
     statuses = [s for _, s in steps]
     assert statuses.count("accepted") >= 3, statuses  # the old trial's confirmation
     assert statuses.index("reverted") == TRIAL_REPEATS - 1, statuses
     assert "relocalized" not in statuses, statuses
-    assert np.hypot(*(f.x[:2] - poses[START + n][:2])) < 1.0
+    assert np.hypot(*(f.x[:2] - start[:2])) < 1.0
 
 
 def test_commanded_turns_while_pinned_do_not_confirm_a_restart(localizer, drive):
@@ -239,15 +246,7 @@ def test_commanded_turns_while_pinned_do_not_confirm_a_restart(localizer, drive)
     TRIAL_REPEATS (held-out city 31, stop 41: confirmed 22 m off in three steps)."""
     from localization.filtering.restart_trial import TRIAL_REPEATS, VIEW_TURN
 
-    images, poses, controls = drive
-    W = localizer.transform(images)
-    n = 10
-    f = _tracking(localizer, W, drive, relocalize_after=n)
-    off_map = W[0] + 100.0 * W.std(axis=0)
-    for t in range(START, START + n - 1):
-        f.step(controls[t - 1], off_map)
-    look_alike = W[START + n + 120]
-    assert f.step(controls[START + n - 1], look_alike)[1] == "relocalized"
+    f, look_alike, start = _restarted_at_a_look_alike(localizer, drive)
     turn = np.array([0.18, 1.0])
     assert f.motion_model.predict(np.zeros(3), f.gain * turn)[2] >= VIEW_TURN
     statuses = [f.step(turn, look_alike, contact=("city",))[1] for _ in range(3)]
@@ -257,7 +256,7 @@ def test_commanded_turns_while_pinned_do_not_confirm_a_restart(localizer, drive)
                  for _ in range(TRIAL_REPEATS + 2)]
     assert statuses.index("reverted") == TRIAL_REPEATS - 1, statuses
     assert "relocalized" not in statuses, statuses
-    assert np.hypot(*(f.x[:2] - poses[START + n][:2])) < 1.0
+    assert np.hypot(*(f.x[:2] - start[:2])) < 1.0
 
 
 def test_a_trial_counts_views_from_somewhere_else_only():

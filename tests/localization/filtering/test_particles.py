@@ -87,6 +87,8 @@ def test_a_start_from_one_image_is_ambiguous_until_the_images_confirm_it(localiz
     assert not pf.confirmed and pf.belief_status == "ambiguous"
     pf.reset(W[0], x0=poses[0])
     assert pf.belief_status == "tracking"
+    pf.reset(W[0], mode="global")
+    assert pf.belief_status == "relocalizing"
     one = _belief(localizer, confirm_steps=1, confirm_share=0.0, confident_weight=1e-9)
     one.reset(W[0])
     assert one.confirmed and one.belief_status == "tracking"  # the rule, not a constant
