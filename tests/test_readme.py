@@ -141,7 +141,8 @@ def slug(heading: str) -> str:
 
 
 @pytest.mark.parametrize("page", ["README.md", "docs/method.md", "docs/results.md",
-                                  "docs/benchmarks.md", "docs/CONTRACTS.md"])
+                                  "docs/benchmarks.md", "docs/CONTRACTS.md",
+                                  "docs/targets.md"])
 def test_links_resolve(page: str) -> None:
     """Relative links name files that exist and headings that exist in them."""
     path = ROOT / page
