@@ -44,6 +44,7 @@ class ImageProposals:
         m = len(reg.w_mean_)
         self._retrieval = NearestNeighbors(n_neighbors=min(int(n_neighbors), len(reg.theta_)))
         self._retrieval.fit(reg.gse_.Z_[:, :m])  # standardised training features
+        self._last: tuple[Array, Array] | None = None  # the last query and its neighbours
 
     def __call__(self, w: Array) -> Array:
         """Poses (k, 3) the features ``w`` (m,) suggest: psi*(w) first (when in domain),
@@ -55,7 +56,10 @@ class ImageProposals:
         """Training poses (n_neighbors, 3) of the training images nearest to ``w`` (m,)."""
         reg = self.localizer.regressor_
         ws = ((w - reg.w_mean_) / reg.w_scale_)[None]
-        return self.train_poses[self._retrieval.kneighbors(ws, return_distance=False)[0]]
+        if self._last is None or not np.array_equal(self._last[0], ws):
+            # a particle step asks twice for the same image (injection and confirmation)
+            self._last = ws, self._retrieval.kneighbors(ws, return_distance=False)[0]
+        return self.train_poses[self._last[1]]
 
     def agreement(self, w: Array, pose: Array, radius: float, heading_scale: float) -> float:
         """Share (float in [0, 1]) of the image's retrieved neighbours within ``radius`` of

@@ -487,3 +487,27 @@ def test_global_start_in_the_look_alike_city_does_not_commit_to_a_wrong_twin():
     assert len(city.twin_shifts(drive.poses[0, :2])) > 0  # the start does have twins
     assert wrong_twin_run(means, drive.poses, city, 0) <= WRONG_TWIN_STEPS
     assert statuses.count("ambiguous") >= 10  # it says it is torn, measured 80
+
+
+def test_image_proposals_retrieve_once_per_image(localizer, features, monkeypatch):
+    """A particle step asks twice for the same image's neighbours (injection and
+    confirmation): the second answer is the first's, without another search; a new image
+    searches again, and its answer is the search's."""
+    from localization.filtering.image_proposals import ImageProposals
+
+    W, _, _ = features
+    proposals = ImageProposals(localizer, 10, np.eye(3) * 1e-4)
+    calls = []
+    search = proposals._retrieval.kneighbors
+    monkeypatch.setattr(proposals._retrieval, "kneighbors",
+                        lambda *a, **k: calls.append(1) or search(*a, **k))
+    first = proposals.neighbours(W[0])
+    again = proposals.neighbours(W[0].copy())
+    np.testing.assert_array_equal(first, again)
+    assert len(calls) == 1
+    other = proposals.neighbours(W[5])
+    assert len(calls) == 2
+    fresh = ImageProposals(localizer, 10, np.eye(3) * 1e-4).neighbours(W[5])
+    np.testing.assert_array_equal(other, fresh)
+    again[:] = 0.0  # a caller's array is its own
+    np.testing.assert_array_equal(proposals.neighbours(W[0]), first)
