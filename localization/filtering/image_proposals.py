@@ -2,7 +2,8 @@
 
 psi*(w) (when in the training domain) and the training poses of the ``n_neighbors``
 nearest training images in feature space (retrieval on the GSE's standardised training
-features), jittered by a body-frame noise. A laser AMCL injects uniformly; an image can say
+features, with the GSE's own index: :meth:`GSERegressor.kneighbors`), jittered by a
+body-frame noise. A laser AMCL injects uniformly; an image can say
 where to look.
 """
 
@@ -11,7 +12,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from sklearn.neighbors import NearestNeighbors
 
 from localization.filtering.particle_motion import sample_body_noise
 from localization.geometry import Array, wrap_angle
@@ -38,12 +38,9 @@ class ImageProposals:
     """
 
     def __init__(self, localizer: Any, n_neighbors: int, noise: Array) -> None:
-        reg = localizer.regressor_
         self.localizer, self.noise = localizer, noise
-        self.train_poses = localizer.from_model(reg.theta_)
-        m = len(reg.w_mean_)
-        self._retrieval = NearestNeighbors(n_neighbors=min(int(n_neighbors), len(reg.theta_)))
-        self._retrieval.fit(reg.gse_.Z_[:, :m])  # standardised training features
+        self.n_neighbors = int(n_neighbors)
+        self.train_poses = localizer.from_model(localizer.regressor_.theta_)
         self._last: tuple[Array, Array] | None = None  # the last query and its neighbours
 
     def __call__(self, w: Array) -> Array:
@@ -54,11 +51,10 @@ class ImageProposals:
 
     def neighbours(self, w: Array) -> Array:
         """Training poses (n_neighbors, 3) of the training images nearest to ``w`` (m,)."""
-        reg = self.localizer.regressor_
-        ws = ((w - reg.w_mean_) / reg.w_scale_)[None]
-        if self._last is None or not np.array_equal(self._last[0], ws):
+        if self._last is None or not np.array_equal(self._last[0], w):
             # a particle step asks twice for the same image (injection and confirmation)
-            self._last = ws, self._retrieval.kneighbors(ws, return_distance=False)[0]
+            ind = self.localizer.regressor_.kneighbors(w[None], self.n_neighbors)[1][0]
+            self._last = np.array(w, dtype=np.float64), ind
         return self.train_poses[self._last[1]]
 
     def agreement(self, w: Array, pose: Array, radius: float, heading_scale: float) -> float:

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from sklearn.utils.validation import check_is_fitted
 
+from localization._validation import check_int
 from localization.geometry import wrap_angle
 from localization.gse.graph import Array, brute_knn, local_pca, same_side
 from localization.gse.jacobian_regression import gaussian_jr
@@ -180,6 +181,23 @@ class GSEQueryMixin:
         zv, _ = self._recover(r, slice(len(self.w_mean_), None))
         theta = self._unlift(zv)
         return theta[:, 0] if getattr(self, "y_1d_", False) else theta
+
+    def kneighbors(self, W: Array, n_neighbors: int) -> tuple[Array, Array]:
+        """The ``n_neighbors`` training samples nearest to each row of ``W`` (n, m) in the
+        standardised feature space, by the index the queries use (HNSW with exact
+        re-ranking on the approximate path; a KD-tree or a GEMM on the exact one).
+
+        Returns
+        -------
+        distances : ndarray (n, k)
+            Ascending, in standardised feature units.
+        indices : ndarray (n, k)
+            Rows of the training sample (``theta_``), ``k = min(n_neighbors, n_train)``.
+        """
+        W = self._check_w(W)
+        k = check_int(n_neighbors, "n_neighbors", low=1)
+        d2, ind = self._query_w((W - self.w_mean_) / self.w_scale_, min(k, len(self.gse_.Z_)))
+        return np.sqrt(np.maximum(d2, 0.0)), np.asarray(ind, dtype=np.intp)
 
     def predict_features(self, Theta: Array) -> Array:
         """Phi*(theta) = g_u(R*(theta)): features (n, m) in original units."""

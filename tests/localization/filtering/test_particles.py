@@ -501,8 +501,8 @@ def test_image_proposals_retrieve_once_per_image(localizer, features, monkeypatc
     want = {k: ImageProposals(localizer, 10, np.eye(3) * 1e-4).neighbours(W[k]) for k in (0, 5)}
     assert not np.array_equal(want[0], want[5])  # two different answers to tell apart
     calls = []
-    search = proposals._retrieval.kneighbors
-    monkeypatch.setattr(proposals._retrieval, "kneighbors",
+    search = localizer.regressor_.kneighbors
+    monkeypatch.setattr(localizer.regressor_, "kneighbors",
                         lambda *a, **k: calls.append(1) or search(*a, **k))
     query = W[0].copy()
     first = proposals.neighbours(query)

@@ -213,3 +213,27 @@ def test_partial_fit_bad_inputs(grown):
     with pytest.raises(ValueError, match="duplicate"):
         inc.partial_fit(PHI(inc.theta_[:1]), inc.theta_[:1])  # a training sample again
     assert len(inc.theta_) == n_before  # a rejected update leaves the model as it was
+
+
+def test_kneighbors_are_the_training_samples_nearest_in_feature_space(pose3, approx3):
+    """The retrieval the particle belief proposes from: exact on the exact path, the HNSW
+    index with exact distances on the approximate one."""
+    from sklearn.neighbors import NearestNeighbors
+
+    W, T, Wt, _ = pose3
+    exact = GSERegressor(periodic=(2,), algorithm="exact").fit(W, T)
+    Ws = (W - exact.w_mean_) / exact.w_scale_
+    d_true, ind_true = NearestNeighbors(n_neighbors=10).fit(Ws).kneighbors(
+        (Wt[:50] - exact.w_mean_) / exact.w_scale_)
+    for model, recall in ((exact, 1.0), (approx3, 0.98)):
+        d, ind = model.kneighbors(Wt[:50], 10)
+        assert d.shape == ind.shape == (50, 10) and np.all(np.diff(d, axis=1) >= 0)
+        assert np.mean([len(set(a) & set(b)) / 10 for a, b in zip(ind, ind_true)]) >= recall
+        np.testing.assert_allclose(d, np.sqrt(((Wt[:50, None] - W[ind]) ** 2).sum(-1))
+                                   / model.w_scale_, rtol=1e-9)
+    np.testing.assert_allclose(exact.kneighbors(Wt[:50], 10)[0], d_true, rtol=1e-9)
+    assert exact.kneighbors(Wt[:1], 10 ** 6)[1].shape == (1, len(W))
+    with pytest.raises(ValueError, match="n_neighbors"):
+        exact.kneighbors(Wt[:1], 0)
+    with pytest.raises(ValueError, match="W"):
+        exact.kneighbors(Wt[:1, :3], 5)
