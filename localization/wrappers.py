@@ -57,7 +57,8 @@ LOCALIZE = ("image", "global")
 FILTER_OPTIONS = {
     "ekf": ("detect_divergence", "alpha", "inflate_factor", "noise", "free_space",
             "contact_motion"),
-    "particles": ("n_particles", "resample_threshold", "resample", "alpha", "alpha_slow",
+    "particles": ("n_particles", "min_particles", "kld_epsilon", "kld_confidence",
+                  "resample_threshold", "resample", "alpha", "alpha_slow",
                   "alpha_fast", "injection_ratio", "max_injection", "ambiguous_injection",
                   "n_neighbors", "proposal_noise", "global_proposal_fraction", "sample_free",
                   "lost_ratio", "doubt_ratio", "confident_weight", "confirm_share",

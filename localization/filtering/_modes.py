@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike
 
 from localization.geometry import Array, wrap_angle
 
-__all__ = ["Mode", "circular_mean", "find_modes", "weighted_pose_stats"]
+__all__ = ["Mode", "cells", "circular_mean", "find_modes", "weighted_pose_stats"]
 
 _COV_FLOOR = np.diag([1e-6, 1e-6, 1e-8])  # a single-particle mode still has a valid covariance
 
@@ -63,7 +63,7 @@ def _distance2(X: Array, centre: Array, heading_scale: float) -> Array:
     return (X[:, 0] - centre[0]) ** 2 + (X[:, 1] - centre[1]) ** 2 + (heading_scale * dyaw) ** 2
 
 
-def _cells(X: Array, radius: float, heading_scale: float) -> Array:
+def cells(X: Array, radius: float, heading_scale: float) -> Array:
     """Grid-cell label (n,) of each pose: cells of ``radius`` m and ``radius / heading_scale``
     rad, numbered 0.. in order of first appearance of their key."""
     ix = np.floor(X[:, 0] / radius).astype(np.int64)
@@ -103,9 +103,9 @@ def find_modes(X: ArrayLike, w: ArrayLike, radius: float = 1.0, heading_scale: f
     left = w / total
     modes: list[Mode] = []
     r2 = radius ** 2
-    cells = _cells(X, radius, heading_scale)
+    labels = cells(X, radius, heading_scale)
     while len(modes) < max_modes and left.sum() >= min_weight:
-        members = (cells == int(np.argmax(np.bincount(cells, weights=left)))) & (left > 0)
+        members = (labels == int(np.argmax(np.bincount(labels, weights=left)))) & (left > 0)
         for _ in range(max_iter):
             mean, _ = weighted_pose_stats(X[members], left[members])
             new = (_distance2(X, mean, heading_scale) <= r2) & (left > 0)

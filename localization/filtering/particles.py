@@ -15,7 +15,8 @@ log-weights ``l_i``; with the names of the code::
               inject p = min(max_injection, max(0, 1 - w_fast / (injection_ratio w_slow)))
               of the particles at the image's proposals; max(p, ambiguous_injection) while
               the dominant mode is unconfirmed
-    resample: when ESS = 1 / sum w_i^2 < resample_threshold N, or particles are injected
+    resample: when ESS = 1 / sum w_i^2 < resample_threshold N, or particles are injected;
+              with ``min_particles``, N then follows the resampled set's spread (KLD-sampling)
 
 (k the localizer's ``control_gain_``, a its calibrated ``consistency(measurement)``;
 the averages: :mod:`localization.filtering.augmented_mcl`).
@@ -43,6 +44,7 @@ from localization.filtering._particle_state import ParticleStateMixin
 from localization.filtering._particle_status import PARTICLE_STATUSES, ParticleStatusMixin
 from localization.filtering.augmented_mcl import LikelihoodAverages
 from localization.filtering.district_particles import check_measurement_noise, image_models
+from localization.filtering.kld_sampling import KLDSampling
 from localization.filtering.map_contact import (
     CONTACT_LOST_STEPS,
     CONTACT_MOTIONS,
@@ -80,6 +82,13 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
         F: ``predict(x, u)`` (the env's ``motion_model``); vectorised when it is a unicycle.
     measurement : {"representation", "pose", "features"}
     n_particles : int
+        The particles of a start, and the most there are.
+    min_particles : int or None
+        KLD-sampling (:mod:`localization.filtering.kld_sampling`, AMCL's adaptive count):
+        after each resampling N becomes Fox's bound on the bins the particles occupy,
+        clamped to ``[min_particles, n_particles]``. None: N stays ``n_particles``.
+    kld_epsilon, kld_confidence : float in (0, 1)
+        The bound's KL distance and probability (AMCL's ``pf_err`` and ``pf_z``).
     resample_threshold : float in (0, 1]
         Resample when ESS < resample_threshold * n_particles.
     resample : callable
@@ -136,7 +145,9 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
     """
 
     def __init__(self, localizer: Any, motion_model: Any, measurement: str = "representation",
-                 n_particles: int = 2000, resample_threshold: float = 0.5,
+                 n_particles: int = 2000, min_particles: int | None = None,
+                 kld_epsilon: float = 0.05, kld_confidence: float = 0.99,
+                 resample_threshold: float = 0.5,
                  resample: Callable[[Array], ArrayLike] = systematic_resample,
                  gate_probability: float = 0.997, alpha: ArrayLike | None = None,
                  alpha_slow: float = 0.01, alpha_fast: float = 0.2, injection_ratio: float = 0.7,
@@ -167,6 +178,8 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
         check_measurement_noise(localizer, measurement)
         self.localizer, self.motion_model, self.measurement = localizer, motion_model, measurement
         self.n_particles = int(n_particles)
+        self.kld = (None if min_particles is None else
+                    KLDSampling(min_particles, self.n_particles, kld_epsilon, kld_confidence))
         unit, unit_open = {"low": 0.0, "high": 1.0}, {"low": 0.0, "high": 1.0, "low_open": True}
         self.resample_threshold = check_real(resample_threshold, "resample_threshold", **unit_open)
         self.amcl = LikelihoodAverages(alpha_slow, alpha_fast, injection_ratio, max_injection)
@@ -364,7 +377,7 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
 
     def _draw(self, share: float) -> int:
         """How many particles to inject at this share: Binomial(N, share)."""
-        return int(self.rng.binomial(self.n_particles, share)) if share > 0 else 0
+        return int(self.rng.binomial(len(self.particles), share)) if share > 0 else 0
 
     def _track(self, u: ArrayLike, w: Array, contact: frozenset[str]) -> None:
         """Step the mode tracker (``contact``: what a blocked contact step touched); a
@@ -381,6 +394,8 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
         X, self._fresh = resample_and_inject(
             self.particles, log_w, self.resample, self.rng, n_inject,
             lambda n: self._jitter(self.proposals(w), n))
+        if self.kld is not None:
+            X, self._fresh = self.kld.adapt(X, self._fresh, self.rng)
         self._set(X)
 
     def _confirm(self, w: Array) -> None:
