@@ -86,7 +86,9 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
     min_particles : int or None
         KLD-sampling (:mod:`localization.filtering.kld_sampling`, AMCL's adaptive count):
         after each resampling N becomes Fox's bound on the bins the particles occupy,
-        clamped to ``[min_particles, n_particles]``. None: N stays ``n_particles``.
+        clamped to ``[min_particles, n_particles]`` (AMCL's default 500, kept after tuning
+        cities 13-14, docs/method.md §13.2). None, or not below ``n_particles``: N stays
+        ``n_particles``.
     kld_epsilon, kld_confidence : float in (0, 1)
         The bound's KL distance and probability (AMCL's ``pf_err`` and ``pf_z``).
     resample_threshold : float in (0, 1]
@@ -145,7 +147,7 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
     """
 
     def __init__(self, localizer: Any, motion_model: Any, measurement: str = "representation",
-                 n_particles: int = 2000, min_particles: int | None = None,
+                 n_particles: int = 2000, min_particles: int | None = 500,
                  kld_epsilon: float = 0.05, kld_confidence: float = 0.99,
                  resample_threshold: float = 0.5,
                  resample: Callable[[Array], ArrayLike] = systematic_resample,
@@ -178,8 +180,10 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
         check_measurement_noise(localizer, measurement)
         self.localizer, self.motion_model, self.measurement = localizer, motion_model, measurement
         self.n_particles = int(n_particles)
-        self.kld = (None if min_particles is None else
-                    KLDSampling(min_particles, self.n_particles, kld_epsilon, kld_confidence))
+        adaptive = min_particles is not None and check_int(
+            min_particles, "min_particles", low=1) < self.n_particles
+        self.kld = (KLDSampling(min_particles, self.n_particles, kld_epsilon, kld_confidence)
+                    if adaptive else None)
         unit, unit_open = {"low": 0.0, "high": 1.0}, {"low": 0.0, "high": 1.0, "low_open": True}
         self.resample_threshold = check_real(resample_threshold, "resample_threshold", **unit_open)
         self.amcl = LikelihoodAverages(alpha_slow, alpha_fast, injection_ratio, max_injection)

@@ -87,3 +87,14 @@ def test_a_start_from_one_image_begins_with_every_particle(localizer, features):
                         seed=0)
     pf.reset(W[0])
     assert len(pf.particles) == 800
+
+
+def test_the_default_adapts_from_n_particles_down_to_500(localizer):
+    pf = ParticleBelief(localizer, UnicycleModel(0.1))
+    assert pf.kld is not None and (pf.kld.min_particles, pf.kld.max_particles) == (500, 2000)
+    assert ParticleBelief(localizer, UnicycleModel(0.1), n_particles=300).kld is None
+    assert ParticleBelief(localizer, UnicycleModel(0.1), min_particles=None).kld is None
+    with pytest.raises(TypeError, match="min_particles"):
+        ParticleBelief(localizer, UnicycleModel(0.1), min_particles=2.5)
+    with pytest.raises(ValueError, match="min_particles"):
+        ParticleBelief(localizer, UnicycleModel(0.1), min_particles=0)
