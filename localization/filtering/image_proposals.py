@@ -41,7 +41,6 @@ class ImageProposals:
         self.localizer, self.noise = localizer, noise
         self.n_neighbors = int(n_neighbors)
         self.train_poses = localizer.from_model(localizer.regressor_.theta_)
-        self._last: tuple[Array, Array] | None = None  # the last query and its neighbours
 
     def __call__(self, w: Array) -> Array:
         """Poses (k, 3) the features ``w`` (m,) suggest: psi*(w) first (when in domain),
@@ -51,11 +50,8 @@ class ImageProposals:
 
     def neighbours(self, w: Array) -> Array:
         """Training poses (n_neighbors, 3) of the training images nearest to ``w`` (m,)."""
-        if self._last is None or not np.array_equal(self._last[0], w):
-            # a particle step asks twice for the same image (injection and confirmation)
-            ind = self.localizer.regressor_.kneighbors(w[None], self.n_neighbors)[1][0]
-            self._last = np.array(w, dtype=np.float64), ind
-        return self.train_poses[self._last[1]]
+        ind = self.localizer.regressor_.kneighbors(w[None], self.n_neighbors)[1][0]
+        return self.train_poses[ind]
 
     def agreement(self, w: Array, pose: Array, radius: float, heading_scale: float) -> float:
         """Share (float in [0, 1]) of the image's retrieved neighbours within ``radius`` of

@@ -92,7 +92,7 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
     kld_epsilon, kld_confidence : float in (0, 1)
         The bound's KL distance and probability (AMCL's ``pf_err`` and ``pf_z``).
     resample_threshold : float in (0, 1]
-        Resample when ESS < resample_threshold * n_particles.
+        Resample when ESS < resample_threshold * N (N: the current count).
     resample : callable
         ``filterpy.monte_carlo`` scheme, weights (N,) -> indexes (N,).
     gate_probability : float in (0, 1)

@@ -488,27 +488,3 @@ def test_global_start_in_the_look_alike_city_does_not_commit_to_a_wrong_twin():
     assert wrong_twin_run(means, drive.poses, city, 0) <= WRONG_TWIN_STEPS
     assert statuses.count("ambiguous") >= 10  # it says it is torn, measured 80
 
-
-def test_image_proposals_retrieve_once_per_image(localizer, features, monkeypatch):
-    """A particle step asks twice for the same image's neighbours (injection and
-    confirmation): the second answer is the first's, without another search. The memory
-    is of the query's values: a caller that reuses its array for another image, or changes
-    the answer it got, never reads a stale or changed answer."""
-    from localization.filtering.image_proposals import ImageProposals
-
-    W, _, _ = features
-    proposals = ImageProposals(localizer, 10, np.eye(3) * 1e-4)
-    want = {k: ImageProposals(localizer, 10, np.eye(3) * 1e-4).neighbours(W[k]) for k in (0, 5)}
-    assert not np.array_equal(want[0], want[5])  # two different answers to tell apart
-    calls = []
-    search = localizer.regressor_.kneighbors
-    monkeypatch.setattr(localizer.regressor_, "kneighbors",
-                        lambda *a, **k: calls.append(1) or search(*a, **k))
-    query = W[0].copy()
-    first = proposals.neighbours(query)
-    first[:] = 0.0  # the caller's own array
-    np.testing.assert_array_equal(proposals.neighbours(query), want[0])
-    assert len(calls) == 1
-    query[:] = W[5]  # the same array, another image
-    np.testing.assert_array_equal(proposals.neighbours(query), want[5])
-    assert len(calls) == 2
