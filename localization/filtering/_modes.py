@@ -101,19 +101,33 @@ def find_modes(X: ArrayLike, w: ArrayLike, radius: float = 1.0, heading_scale: f
     if not (total > 0 and np.all(w >= 0) and np.all(np.isfinite(w))):
         raise ValueError("w must be finite, non-negative and not all zero")
     left = w / total
-    modes: list[Mode] = []
-    r2 = radius ** 2
     labels = cells(X, radius, heading_scale)
-    while len(modes) < max_modes and left.sum() >= min_weight:
-        members = (labels == int(np.argmax(np.bincount(labels, weights=left)))) & (left > 0)
-        for _ in range(max_iter):
-            mean, _ = weighted_pose_stats(X[members], left[members])
-            new = (_distance2(X, mean, heading_scale) <= r2) & (left > 0)
-            if not new.any() or np.array_equal(new, members):
-                break
-            members = new
-        weight = float(left[members].sum())
-        mean, cov = weighted_pose_stats(X[members], left[members])
-        modes.append(Mode(weight, mean, cov))
-        left = np.where(members, 0.0, left)
+    idx = np.flatnonzero(left > 0)  # the particles no mode holds yet (weight > 0)
+    modes: list[Mode] = []
+    while len(modes) < max_modes and left[idx].sum() >= min_weight:
+        members = _mean_shift(X[idx], left[idx], labels[idx], radius, heading_scale, max_iter)
+        mean, cov = weighted_pose_stats(X[idx[members]], left[idx[members]])
+        modes.append(Mode(float(left[idx[members]].sum()), mean, cov))
+        idx = idx[~members]
     return sorted(modes, key=lambda m: -m.weight)
+
+
+def _mean_shift(X: Array, w: Array, labels: Array, radius: float, heading_scale: float,
+                max_iter: int) -> Array:
+    """Members (n,) bool of one mode of the particles ``X`` (n, 3) of weights ``w`` > 0:
+    seeded at the heaviest cell of ``labels``, shifted to its flat-kernel mean."""
+    members = labels == int(np.argmax(np.bincount(labels, weights=w)))
+    for _ in range(max_iter):
+        new = _distance2(X, _weighted_mean(X[members], w[members]), heading_scale) <= radius ** 2
+        if not new.any() or np.array_equal(new, members):
+            break
+        members = new
+    return members
+
+
+def _weighted_mean(X: Array, w: Array) -> Array:
+    """The weighted mean pose (3,) of ``X`` (n, 3), heading on the circle (the mean of
+    :func:`weighted_pose_stats`, without its covariance)."""
+    s, c = float(w @ np.sin(X[:, 2])), float(w @ np.cos(X[:, 2]))
+    yaw = float(wrap_angle(np.arctan2(s, c))) if np.hypot(s, c) > 1e-300 else 0.0
+    return np.array([w @ X[:, 0], w @ X[:, 1], yaw]) / np.array([w.sum(), w.sum(), 1.0])

@@ -40,8 +40,8 @@ from collections.abc import Callable, Collection
 from typing import Any
 
 import numpy as np
-from scipy.special import logsumexp
 
+from localization.filtering.log_weights import log_sum_exp
 from localization.geometry import Array, wrap_angle
 
 __all__ = ["CONTACT_CLEARANCE", "CONTACT_GRID", "CONTACT_KINDS", "CONTACT_LOST_STEPS",
@@ -202,7 +202,7 @@ def weigh_contact(free_space: FreeSpace, X: Array, log_weights: Array,
     its :func:`contact_log_likelihood` (N,), and whether it contradicts the belief (more
     than ``CONTACT_WEIGHT`` of the weight where the map has room)."""
     explained = _explained(free_space, X, bearing)
-    share = float(np.exp(logsumexp(log_weights[explained]))) if explained.any() else 0.0
+    share = float(np.exp(log_sum_exp(log_weights[explained]))) if explained.any() else 0.0
     return np.where(explained, 0.0, np.log(CONTACT_MISS)), share < 1.0 - CONTACT_WEIGHT
 
 

@@ -35,7 +35,6 @@ from typing import Any
 import numpy as np
 from filterpy.monte_carlo import systematic_resample
 from numpy.typing import ArrayLike
-from scipy.special import logsumexp
 from sklearn.exceptions import NotFittedError
 
 from localization._validation import check_choice, check_int, check_real
@@ -45,6 +44,7 @@ from localization.filtering._particle_status import PARTICLE_STATUSES, ParticleS
 from localization.filtering.augmented_mcl import LikelihoodAverages
 from localization.filtering.district_particles import check_measurement_noise, image_models
 from localization.filtering.kld_sampling import KLDSampling
+from localization.filtering.log_weights import log_sum_exp, normalise_log_weights
 from localization.filtering.map_contact import (
     CONTACT_LOST_STEPS,
     CONTACT_MOTIONS,
@@ -241,7 +241,8 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
     def _set(self, X: Array, log_w: Array | None = None) -> None:
         self.particles = np.column_stack([X[:, :2], wrap_angle(X[:, 2])])
         n = len(X)
-        self.log_weights = np.full(n, -np.log(n)) if log_w is None else log_w - logsumexp(log_w)
+        self.log_weights = (np.full(n, -np.log(n)) if log_w is None
+                            else normalise_log_weights(log_w))
         self.modes = find_modes(self.particles, np.exp(self.log_weights), self.mode_radius,
                                 self.heading_scale, self.max_modes, self.min_mode_weight)
 
@@ -347,11 +348,11 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
             return np.nan, self.status
         log_L = self.likelihood.log_likelihood(z, self.particles) + log_B
         old = self.log_weights[~self._fresh] if (~self._fresh).any() else self.log_weights
-        w_avg = float(np.exp(logsumexp(old + log_L[~self._fresh] if (~self._fresh).any()
-                                       else old + log_L) - logsumexp(old)))
+        w_avg = float(np.exp(log_sum_exp(old + log_L[~self._fresh] if (~self._fresh).any()
+                                         else old + log_L) - log_sum_exp(old)))
         self.amcl.update(w_avg)
         log_w = self.log_weights + log_L
-        log_w -= logsumexp(log_w)
+        log_w = normalise_log_weights(log_w)
         n_amcl = self._draw(self.amcl.injection_probability)
         n_inject = max(n_amcl, 0 if self.confirmed else self._draw(self.ambiguous_injection))
         if n_inject > 0 or 1.0 / np.sum(np.exp(2 * log_w)) < self.resample_threshold * len(log_w):

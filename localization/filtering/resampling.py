@@ -12,8 +12,8 @@ from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.special import logsumexp
 
+from localization.filtering.log_weights import normalise_log_weights
 from localization.geometry import Array
 
 __all__ = ["resample_and_inject", "seeded_resample"]
@@ -39,7 +39,7 @@ def resample_and_inject(X: Array, log_w: Array, resample: Callable[[Array], Arra
     scheme ``resample`` (:func:`seeded_resample`), then replace ``n_inject`` random ones by
     ``draw(n_inject)`` (Augmented MCL's injections). Returns the particles (N, d) and which
     of them were injected (N,) bool."""
-    p = np.exp(log_w - logsumexp(log_w))
+    p = np.exp(normalise_log_weights(log_w))
     X = np.asarray(X)[seeded_resample(resample, p / p.sum(), rng)]
     fresh = np.zeros(len(X), dtype=bool)
     if n_inject > 0 and draw is not None:
