@@ -12,7 +12,8 @@ hypothesis the EKF follows. With the names of the code, after each particle step
     support   = sum_i w_i [ d(X_i, x) < radius ],  d^2 = dx^2 + dy^2 + (heading_scale dyaw)^2
     condemned = NIS > strong_nis on the last strong_steps steps, gated max_gated steps,
                 or support < support_weight max_unsupported steps (all in a row);
-                after a restart until supported for probation steps in a row
+                after a restart until supported for probation steps in a row,
+                and after a contact that contradicted the particles until they support it
     support >= support_weight or not condemned  -> report the EKF's x, P        ("ekf")
     condemned, mode weight >= confident_weight  -> restart the EKF at the dominant
                                                    mode (mean, cov), report it  ("restarted")
@@ -143,6 +144,11 @@ class ModeTracker:
         self.ekf.reset(w, mode.mean, mode.cov)
         self.support, self.strong, self.unsupported, self.supported = 1.0, 0, 0, 0
         self.condemned = True  # on probation until supported for `probation` steps
+    def contradict(self) -> None:
+        """A contact contradicted the particles (:mod:`~.contact_spread`): the EKF, on their
+        old hypothesis, is condemned until they support it again."""
+        self.condemned, self.supported = True, 0
+
     def support_of(self, particles: Array, weights: Array) -> float:
         """Weight (float) of the particles (N, 3) within ``radius`` of the EKF's mean."""
         d = particles - self.ekf.x

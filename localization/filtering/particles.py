@@ -9,7 +9,9 @@ log-weights ``l_i``; with the names of the code::
               log L_i = -0.5 min(d2_i, gate),   gate = chi2.ppf(gate_probability, dof)
     bump:     l_i = l_i + log B_i on a contact with the city (``free_space``): B_i = 1 where
               the map has a wall at the particle's touched point, CONTACT_MISS where it has
-              room; "lost" for CONTACT_LOST_STEPS when that room holds > CONTACT_WEIGHT
+              room; "lost" for CONTACT_LOST_STEPS when that room holds > CONTACT_WEIGHT,
+              and then first resampled with a share contact_spread moved to the walls
+              the contact could have come from (:mod:`~.contact_spread`)
     AMCL:     w_avg = sum_i w_i L_i / sum_i w_i  (i over the particles not injected last step)
               w_slow += alpha_slow (w_avg - w_slow),  w_fast += alpha_fast (w_avg - w_fast)
               inject p = min(max_injection, max(0, 1 - w_fast / (injection_ratio w_slow)))
@@ -39,14 +41,15 @@ from sklearn.exceptions import NotFittedError
 
 from localization._validation import check_choice, check_int, check_real
 from localization.filtering._modes import Mode, find_modes
+from localization.filtering._particle_contact import ParticleContactMixin
 from localization.filtering._particle_state import ParticleStateMixin
 from localization.filtering._particle_status import PARTICLE_STATUSES, ParticleStatusMixin
 from localization.filtering.augmented_mcl import LikelihoodAverages
+from localization.filtering.contact_spread import ContactSpread
 from localization.filtering.district_particles import check_measurement_noise, image_models
 from localization.filtering.kld_sampling import KLDSampling
 from localization.filtering.log_weights import log_sum_exp, normalise_log_weights
 from localization.filtering.map_contact import (
-    CONTACT_LOST_STEPS,
     CONTACT_MOTIONS,
     Contact,
     FreeSpace,
@@ -54,7 +57,6 @@ from localization.filtering.map_contact import (
     check_bearing,
     check_free_space,
     contact_kinds,
-    weigh_contact,
 )
 from localization.filtering.measurement_noise import inflate
 from localization.filtering.mode_confirmation import ModeConfirmation
@@ -71,7 +73,7 @@ __all__ = ["PARTICLE_STATUSES", "ParticleBelief"]
 RESET_MODES = ("image", "global")
 
 
-class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
+class ParticleBelief(ParticleContactMixin, ParticleStatusMixin, ParticleStateMixin):
     """Particle-filter pose belief fed with image features (see the module docstring).
 
     Parameters
@@ -144,6 +146,10 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
         :func:`~localization.filtering.map_contact.contact_log_likelihood`, and one that
         leaves less than ``1 - CONTACT_WEIGHT`` of the weight where the map explains it
         makes the belief "lost" for ``CONTACT_LOST_STEPS`` steps (as the EKF's). None: no.
+    contact_spread : float in [0, 1]; contact_spread_distance : float
+        On such a contradicting contact, this share of the particles is moved up to this
+        many metres to where the map explains it
+        (:class:`~localization.filtering.contact_spread.ContactSpread`; 0: none).
     """
 
     def __init__(self, localizer: Any, motion_model: Any, measurement: str = "representation",
@@ -163,7 +169,8 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
                  min_mode_weight: float = 0.002,
                  track_mode: bool | dict[str, Any] = True,
                  seed: int | None = None, contact_motion: str = "blocked",
-                 free_space: FreeSpace | None = None) -> None:
+                 free_space: FreeSpace | None = None, contact_spread: float = 0.5,
+                 contact_spread_distance: float = 2.0) -> None:
         if measurement not in MEASUREMENTS:
             raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
         if isinstance(n_particles, bool) or int(n_particles) != n_particles or n_particles < 1:
@@ -217,6 +224,7 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
         self.rng = np.random.default_rng(seed)
         self.contact_motion = check_choice(contact_motion, "contact_motion", CONTACT_MOTIONS)
         self.free_space, self._bumped = check_free_space(free_space), 0
+        self.spread = ContactSpread(contact_spread, contact_spread_distance)
         self.tracker = make_tracker(track_mode, localizer, motion_model, measurement,
                                     alpha=self.alpha, radius=self.mode_radius,
                                     heading_scale=self.heading_scale,
@@ -368,17 +376,6 @@ class ParticleBelief(ParticleStatusMixin, ParticleStateMixin):
         self._track(u, w, contact)
         self._misses, self.belief_status = 0, self.status
         return w_avg, self.status
-
-    def _bump(self, kinds: frozenset[str], bearing: float | None) -> Array | float:
-        """The log-likelihood (N,) of a contact with the city at the particles (0 without);
-        "lost" for ``CONTACT_LOST_STEPS`` steps after one that contradicts the belief."""
-        self._bumped = max(self._bumped - 1, 0)
-        if "city" not in kinds or self.free_space is None:
-            return 0.0
-        log_B, contradicted = weigh_contact(self.free_space, self.particles, self.log_weights,
-                                            bearing)
-        self._bumped = CONTACT_LOST_STEPS if contradicted else self._bumped
-        return log_B
 
     def _draw(self, share: float) -> int:
         """How many particles to inject at this share: Binomial(N, share)."""

@@ -180,21 +180,23 @@ def test_a_contact_weighs_the_particles_by_the_map_at_the_touched_side(localizer
 
 def test_without_a_map_or_with_traffic_a_contact_weighs_nothing(localizer, features):
     """A map that has room everywhere ahead (every particle's touched point is free): a
-    bump into the city weighs the particles and makes the belief "lost"; the same bump
-    without a map, or a bump into traffic with the map, leaves particles and weights those
-    of the same seeded run without the map."""
+    bump into the city weighs the particles and makes the belief "lost" (without the
+    spread of test_contact_spread.py the particles are those of the run without the map);
+    the same bump without a map, or a bump into traffic with the map, leaves particles
+    and weights those of the same seeded run without the map."""
     W, poses, controls = features
 
-    def run(free_space, contact):
-        pf = _belief(localizer, free_space=free_space, track_mode=False)
+    def run(free_space, contact, spread=0.5):
+        pf = _belief(localizer, free_space=free_space, track_mode=False, contact_spread=spread)
         pf.reset(W[0], x0=poses[0])
         pf.step(controls[0], W[1], contact=contact, bearing=0.0)
         return pf
 
     room = _Wall(1e9)
-    weighed, plain = run(room, ("city",)), run(None, ("city",))
+    weighed, plain = run(room, ("city",), spread=0.0), run(None, ("city",))
     np.testing.assert_array_equal(weighed.particles, plain.particles)  # same draws
     assert weighed.status == "lost" and plain.status != "lost"
+    assert run(room, ("city",)).status == "lost"
     for free_space, contact in ((room, ("traffic",)), (None, ("city",))):
         pf, without = run(free_space, contact), run(None, contact)
         np.testing.assert_array_equal(pf.particles, without.particles)
