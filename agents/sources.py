@@ -86,8 +86,8 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
                   scene_seed: int = 0, camera: str = "perspective",
                   image_size: tuple[int, int] = (64, 64), motion_noise: float = 0.1,
                   max_episode_steps: int | None = None, start: str = "lane",
-                  kidnap_at: tuple[int, ...] = (), city_layout: str = "random",
-                  city_size: float = 20.0, conditions: Any = None,
+                  kidnap_at: tuple[int, ...] = (), kidnap_push: tuple[float, float] | None = None,
+                  city_layout: str = "random", city_size: float = 20.0, conditions: Any = None,
                   **belief_kwargs: Any) -> gym.Env:
     """``AppearanceNav-v0`` with the named pose source (see the module docstring).
 
@@ -110,6 +110,9 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
     kidnap_at : tuple of int
         Steps of each episode that start with a kidnap (:class:`envs.kidnapping.KidnapWrapper`
         under the pose source, seeded by the reset seed: no pose source is told).
+    kidnap_push : (float, float), optional
+        Make each kidnap a sideways shove by a distance in this range (m) instead of a
+        teleport (``KidnapWrapper(push=...)``, e.g. ``envs.kidnapping.PUSH_DISTANCE``).
     city_layout : {"random", "lookalike"}
         The env's city layout.
     conditions : str or dict, optional
@@ -134,8 +137,10 @@ def make_pose_env(source: str, localizer: Any = None, *, measurement: str | None
                    **({} if conditions is None else {"conditions": conditions}))
     if start == "lane":
         env = LaneStart(env)
+    if kidnap_push is not None and not kidnap_at:
+        raise ValueError("kidnap_push shapes the kidnaps of kidnap_at: give kidnap_at too")
     if kidnap_at:
-        env = KidnapWrapper(env, at_steps=kidnap_at)
+        env = KidnapWrapper(env, at_steps=kidnap_at, push=kidnap_push)
     if source == "oracle":
         return OracleWrapper(env)
     if source == "dead_reckoning":

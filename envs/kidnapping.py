@@ -17,6 +17,13 @@ first image seen at the new place. ``info["kidnapped"]`` is True on that step (F
 every other step and on reset); the reward does not count the jump in the distance to the
 goal. The wrapper only reports it in ``info``: a filter fed from the observation is never
 told.
+
+``push=(low, high)`` makes each kidnap a shove instead: the robot is moved sideways, to
+either side, by a distance drawn in ``[low, high]`` metres and turned by up to
+:data:`PUSH_TURN` rad, to a pose clear of buildings (``min_distance`` does not apply; where
+no such pose is found in ``_MAX_TRIES`` draws it stays put). :data:`PUSH_DISTANCE`
+(0.8-1.6 m) takes a robot on a lane off the localizers' training tube (within 0.3 m of the
+lanes) without leaving its street: the case of a robot pushed off its lane.
 """
 
 from __future__ import annotations
@@ -32,9 +39,13 @@ from numpy.typing import NDArray
 from envs.datasets import POSE_MARGIN
 from envs.lanes import lane_poses
 
-__all__ = ["KIDNAP_RATE_PER_METRE", "KidnapWrapper"]
+__all__ = ["KIDNAP_RATE_PER_METRE", "PUSH_DISTANCE", "PUSH_TURN", "KidnapWrapper"]
 
 KIDNAP_RATE_PER_METRE = 0.005  # Fox, Burgard & Thrun's protocol
+#: m, the range of a push's sideways shove (``push``; the robustness benchmark's "push" rows)
+PUSH_DISTANCE = (0.8, 1.6)
+#: rad, the largest turn of a push
+PUSH_TURN = 0.5
 _MAX_TRIES = 1000
 
 
@@ -55,6 +66,9 @@ class KidnapWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         Seeds the kidnap poses and distances; ``reset(seed=s)`` re-seeds them from s.
     lanes : {"streets", "route"}
         Lanes the new pose is drawn around (:func:`envs.lanes.lane_poses`).
+    push : (float, float) or None
+        ``(low, high)``: each kidnap shoves the robot sideways by a distance in that range
+        (m) instead (see the module docstring); None: a teleport.
 
     Attributes
     ----------
@@ -66,10 +80,11 @@ class KidnapWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def __init__(self, env: gym.Env, at_steps: Iterable[int] = (),
                  rate_per_metre: float | None = None, min_distance: float = 5.0,
-                 seed: int | None = None, lanes: str = "streets") -> None:
+                 seed: int | None = None, lanes: str = "streets",
+                 push: tuple[float, float] | None = None) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self, at_steps=tuple(at_steps), rate_per_metre=rate_per_metre,
-            min_distance=min_distance, seed=seed, lanes=lanes)
+            min_distance=min_distance, seed=seed, lanes=lanes, push=push)
         gym.Wrapper.__init__(self, env)
         base = env.unwrapped
         if not (hasattr(base, "set_pose") and hasattr(base, "city")):
@@ -91,6 +106,7 @@ class KidnapWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.at_steps = frozenset(int(s) for s in steps)
         self.rate_per_metre = None if rate_per_metre is None else float(rate_per_metre)
         self.min_distance, self.lanes = float(min_distance), lanes
+        self.push = None if push is None else _check_push(push)
         self._rng = np.random.default_rng(seed)
         self._steps, self.kidnaps, self.odometer = 0, 0, 0.0
         self._next_at = math.inf
@@ -139,11 +155,24 @@ class KidnapWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         raise RuntimeError(f"no free street pose {self.min_distance} m away from {avoid}: "
                            "lower min_distance")
 
+    def push_pose(self, pose: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``pose`` (3,) shoved sideways by a distance in ``push`` and turned by up to
+        :data:`PUSH_TURN`, clear of buildings (``pose`` itself when no draw is)."""
+        city, (low, high) = self.env.unwrapped.city, self.push
+        side = np.array([-np.sin(pose[2]), np.cos(pose[2])])
+        for _ in range(_MAX_TRIES):
+            xy = pose[:2] + self._rng.uniform(low, high) * self._rng.choice([-1.0, 1.0]) * side
+            if city.free_mask(xy[None], POSE_MARGIN)[0]:
+                yaw = pose[2] + self._rng.uniform(-PUSH_TURN, PUSH_TURN)
+                return np.array([xy[0], xy[1], math.remainder(yaw, 2 * math.pi)])
+        return np.asarray(pose, dtype=np.float64).copy()
+
     def _kidnap(self) -> float:
-        """Teleport; return the reward correction (distance to goal after - before)."""
+        """Teleport (or push); return the reward correction (distance to goal after -
+        before)."""
         base = self.env.unwrapped
         before = base.pose
-        pose = self.sample_pose(before)
+        pose = self.sample_pose(before) if self.push is None else self.push_pose(before)
         base.set_pose(pose)
         self._pose = base.pose.copy()
         self.kidnaps += 1
@@ -152,3 +181,14 @@ class KidnapWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if goal is None:
             return 0.0
         return float(np.hypot(*(pose[:2] - goal)) - np.hypot(*(before[:2] - goal)))
+
+
+def _check_push(push: Any) -> tuple[float, float]:
+    """``push`` as (low, high) with 0 <= low <= high, finite."""
+    try:
+        low, high = (float(v) for v in push)
+    except (TypeError, ValueError):
+        raise ValueError(f"push must be (low, high) metres, got {push!r}") from None
+    if not (math.isfinite(high) and 0.0 <= low <= high):
+        raise ValueError(f"push must be (low, high) metres with 0 <= low <= high, got {push!r}")
+    return low, high

@@ -11,7 +11,7 @@ from scipy.stats import poisson
 
 import envs  # noqa: F401  (registers AppearanceNav-v0)
 from envs.datasets import POSE_MARGIN
-from envs.kidnapping import KIDNAP_RATE_PER_METRE, KidnapWrapper
+from envs.kidnapping import KIDNAP_RATE_PER_METRE, PUSH_DISTANCE, PUSH_TURN, KidnapWrapper
 from envs.scene import generate_city
 
 
@@ -72,6 +72,30 @@ def test_kidnaps_at_the_given_steps_to_a_far_free_street_pose():
     env.close()
 
 
+def test_a_push_shoves_the_robot_sideways_to_a_free_pose():
+    env = gym.make("AppearanceNav-v0", scene_seed=0, image_size=(32, 32), max_episode_steps=None,
+                   motion_noise=0.0)
+    kid = KidnapWrapper(env, at_steps=(2,), push=PUSH_DISTANCE, seed=1)
+    city, low, high = env.unwrapped.city, *PUSH_DISTANCE
+    sides = []
+    for seed in range(6):
+        _, info = kid.reset(seed=seed)
+        _, _, _, _, info = kid.step(np.zeros(2))
+        before = info["pose"]
+        _, _, _, _, info = kid.step(np.zeros(2))  # pushed, then a step at rest
+        assert info["kidnapped"]
+        d, yaw = info["pose"][:2] - before[:2], before[2]
+        along = d @ [np.cos(yaw), np.sin(yaw)]
+        side = d @ [-np.sin(yaw), np.cos(yaw)]
+        if np.hypot(*d) > 0:  # stays put only where no free pose was drawn
+            assert abs(along) < 0.02 and low - 0.02 <= abs(side) <= high + 0.02
+            assert abs(np.angle(np.exp(1j * (info["pose"][2] - yaw)))) <= PUSH_TURN + 0.02
+            assert city.is_free(info["pose"][0], info["pose"][1], POSE_MARGIN - 0.05)
+            sides.append(np.sign(side))
+    assert len(sides) >= 4 and len(set(sides)) == 2  # both sides
+    env.close()
+
+
 def test_rate_per_metre_is_a_poisson_process_in_the_distance_driven():
     """20 runs of 2000 m at 0.005 kidnaps per metre: 200 expected; the total must lie in
     the 99.9 % Poisson interval (and each run's count is seeded: same seed, same steps)."""
@@ -114,6 +138,9 @@ def test_reward_does_not_count_the_teleport():
     ({"min_distance": -1.0}, ValueError, "min_distance"),
     ({"seed": "a"}, TypeError, "seed"),
     ({"lanes": "rivers"}, ValueError, "lanes"),
+    ({"push": (1.0, 0.5)}, ValueError, "push"),
+    ({"push": 1.0}, ValueError, "push"),
+    ({"push": (-1.0, 1.0)}, ValueError, "push"),
 ])
 def test_bad_arguments_raise_clear_errors(kwargs, error, match):
     with pytest.raises(error, match=match):

@@ -23,8 +23,10 @@ docs/benchmarks.md §11). Then every
 (agent, pose source, condition) row runs ``episodes`` episodes per city from lane starts to
 random goals, the same reset seeds in every row:
 
-* conditions: ``nominal`` and ``kidnap`` (one unannounced kidnap at step ``kidnap_at``,
-  :class:`envs.kidnapping.KidnapWrapper`) on the daylight localizer; each appearance preset
+* conditions: ``nominal``, ``kidnap`` (one unannounced kidnap at step ``kidnap_at``,
+  :class:`envs.kidnapping.KidnapWrapper`) and ``push`` (at that step the robot is shoved
+  0.8-1.6 m sideways off its lane and turned by up to 0.5 rad, unannounced:
+  ``KidnapWrapper(push=PUSH_DISTANCE)``) on the daylight localizer; each appearance preset
   of :data:`envs.conditions.PRESETS` (``traffic``: moving vehicles and pedestrians, a
   collision hazard) on the randomised localizer;
 * pose sources: ``oracle`` (true pose), ``ekf`` and ``particles`` (the GSE belief with either
@@ -63,6 +65,7 @@ from agents.evaluation import Episode, as_records, run_episodes, summarize
 from agents.scripted import ScriptedAgent
 from agents.sources import make_pose_env
 from envs.conditions import PRESETS
+from envs.kidnapping import PUSH_DISTANCE
 from localization.loading import load_localizer
 from localization.localizer import AppearanceLocalizer
 from localization.workflows.benchmarks.appearance import fit_looks, training_looks
@@ -90,7 +93,8 @@ SOURCES = ("oracle", "ekf", "particles", "dead_reckoning")
 FILTERS = {"ekf": "ekf", "particles": "particles"}
 AGENTS = ("scripted", "ppo")
 #: conditions that are not a preset of envs.conditions
-SPECIAL = ("nominal", "kidnap")
+SPECIAL = ("nominal", "kidnap", "push")
+KIDNAPS = ("kidnap", "push")  # the conditions with a kidnap at kidnap_at
 #: presets with moving things (the image-free sources run them too: collisions)
 MOVING = tuple(name for name, c in PRESETS.items() if c.vehicles or c.pedestrians)
 DEFAULT_CONDITIONS = ",".join([*SPECIAL, *(p for p in PRESETS if p != "default")])
@@ -104,7 +108,8 @@ class RobustnessConfig:
         "help": "comma-separated scene seeds: the held-out 21,22 (never used to tune "
                 "anything), or tuning cities for a run that chooses settings"})
     conditions: str = field(default=DEFAULT_CONDITIONS, metadata={
-        "help": "comma-separated: nominal, kidnap and appearance presets (envs.conditions)"})
+        "help": "comma-separated: nominal, kidnap, push and appearance presets "
+                "(envs.conditions)"})
     sources: str = field(default=",".join(SOURCES), metadata={
         "help": "comma-separated pose sources: " + ", ".join(SOURCES)})
     agents: str = field(default="scripted,ppo", metadata={
@@ -117,7 +122,8 @@ class RobustnessConfig:
                 "PPO rows"})
     episodes: int = field(default=100, metadata={"help": "episodes per row and city"})
     seed: int = field(default=3_000_000, metadata={"help": "first reset seed"})
-    kidnap_at: int = field(default=40, metadata={"help": "step of the kidnap ('kidnap' rows)"})
+    kidnap_at: int = field(default=40, metadata={
+        "help": "step of the kidnap ('kidnap' rows) and of the push ('push' rows)"})
     image_size: int = field(default=64, metadata={"help": "square image side (px)"})
     motion_noise: float = field(default=0.1, metadata={"help": "env actuation noise"})
     n_train: int = field(default=10000, metadata={
@@ -181,7 +187,7 @@ class RobustnessConfig:
 
 
 def training_of(condition: str) -> str:
-    """The localizer a condition runs on: "daylight" for nominal and kidnap, else
+    """The localizer a condition runs on: "daylight" for nominal, kidnap and push, else
     "randomised"."""
     return "daylight" if condition in SPECIAL else "randomised"
 
@@ -272,7 +278,8 @@ def make_env(args: RobustnessConfig, city: int, condition: str, source: str) -> 
     return make_pose_env("belief" if source in FILTERS else source, loc, scene_seed=city,
                          image_size=(args.image_size, args.image_size),
                          motion_noise=args.motion_noise, max_episode_steps=args.max_steps,
-                         kidnap_at=(args.kidnap_at,) if condition == "kidnap" else (),
+                         kidnap_at=(args.kidnap_at,) if condition in KIDNAPS else (),
+                         kidnap_push=PUSH_DISTANCE if condition == "push" else None,
                          conditions=None if condition in SPECIAL else condition,
                          **belief_options(args, source))
 

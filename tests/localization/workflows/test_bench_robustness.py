@@ -15,6 +15,7 @@ from localization.workflows.benchmarks.robustness import (
     RobustnessConfig,
     _summary,
     localizer_params,
+    make_env,
     run_robustness_bench,
     runs_condition,
     training_of,
@@ -35,6 +36,22 @@ def test_image_free_sources_skip_lighting_presets_only() -> None:
     assert not runs_condition("oracle", "night") and not runs_condition("dead_reckoning", "dusk")
     assert runs_condition("oracle", "traffic") and runs_condition("dead_reckoning", "kidnap")
     assert training_of("kidnap") == "daylight" and training_of("traffic") == "randomised"
+
+
+def test_a_push_row_shoves_the_robot_at_the_kidnap_step() -> None:
+    from envs.kidnapping import PUSH_DISTANCE, KidnapWrapper
+
+    def kidnapper(condition: str) -> KidnapWrapper | None:
+        env = make_env(RobustnessConfig(kidnap_at=7), 21, condition, "oracle")
+        while not isinstance(env, KidnapWrapper) and hasattr(env, "env"):
+            env = env.env
+        return env if isinstance(env, KidnapWrapper) else None
+
+    push, kidnap = kidnapper("push"), kidnapper("kidnap")
+    assert push.push == PUSH_DISTANCE and push.at_steps == {7}
+    assert kidnap.push is None and kidnap.at_steps == {7}
+    assert kidnapper("nominal") is None
+    assert training_of("push") == "daylight" and runs_condition("oracle", "push")
 
 
 def test_rows_on_the_true_pose_alone_fit_no_localizer() -> None:
