@@ -69,8 +69,12 @@ from localization.workflows.benchmarks.gse import GSEBenchConfig
 from localization.workflows.benchmarks.noise_models import NoiseBenchConfig
 from localization.workflows.benchmarks.parallel import ParallelBenchConfig
 from localization.workflows.benchmarks.robustness import AGENTS as ROBUST_AGENTS
+from localization.workflows.benchmarks.robustness import (
+    DAYLIGHT_LANES,
+    SPECIAL,
+    RobustnessConfig,
+)
 from localization.workflows.benchmarks.robustness import SOURCES as ROBUST_SOURCES
-from localization.workflows.benchmarks.robustness import SPECIAL, RobustnessConfig
 from localization.workflows.benchmarks.street_features import FEATURES as STREET_FEATURES
 from localization.workflows.kidnap_eval import FILTERS
 from localization.workflows.parallel import check_ray_address
@@ -240,6 +244,7 @@ def _check_robustness_bench(c: RobustnessConfig) -> None:
     check_choice("robustness_randomised_features", c.randomised_features, STREET_FEATURES)
     check_choice("robustness_daylight_features", c.daylight_features, STREET_FEATURES)
     check_choice("robustness_randomised_map", c.randomised_map, RANDOMISED_MAPS)
+    check_choice("robustness_daylight_lanes", c.daylight_lanes, DAYLIGHT_LANES)
     check_numbers(c, positive=("episodes", "image_size", "n_train", "n_train_randomised",
                                "n_drive", "max_steps",
                                "kidnap_at", "workers"),

@@ -95,6 +95,7 @@ AGENTS = ("scripted", "ppo")
 #: conditions that are not a preset of envs.conditions
 SPECIAL = ("nominal", "kidnap", "push")
 KIDNAPS = ("kidnap", "push")  # the conditions with a kidnap at kidnap_at
+DAYLIGHT_LANES = ("streets", "free")  # training poses of the daylight localizer
 #: presets with moving things (the image-free sources run them too: collisions)
 MOVING = tuple(name for name, c in PRESETS.items() if c.vehicles or c.pedestrians)
 DEFAULT_CONDITIONS = ",".join([*SPECIAL, *(p for p in PRESETS if p != "default")])
@@ -128,6 +129,10 @@ class RobustnessConfig:
     motion_noise: float = field(default=0.1, metadata={"help": "env actuation noise"})
     n_train: int = field(default=10000, metadata={
         "help": "street training images of the daylight localizer"})
+    daylight_lanes: str = field(default="streets", metadata={
+        "help": "training poses of the daylight localizer: streets (a tube around the lanes of "
+                "every street, both ways) or free (the whole street surface at every heading, "
+                "lanes='free' of fit_city_localizer; wants more images, e.g. --n-train 40000)"})
     n_train_randomised: int = field(default=16000, metadata={
         "help": "street training images of the randomised-conditions localizer"})
     daylight_features: str = field(default="small_cnn", metadata={
@@ -178,6 +183,9 @@ class RobustnessConfig:
                  for k in ("cities", "conditions", "sources", "agents")}
         known = {"conditions": [*SPECIAL, *PRESETS], "sources": list(SOURCES),
                  "agents": list(AGENTS)}
+        if self.daylight_lanes not in DAYLIGHT_LANES:
+            raise ValueError(f"robustness daylight_lanes must be one of {DAYLIGHT_LANES}, got "
+                             f"{self.daylight_lanes!r}")
         for key, allowed in known.items():
             bad = [n for n in names[key] if n not in allowed]
             if bad or not names[key]:
@@ -200,7 +208,9 @@ def runs_condition(source: str, condition: str) -> bool:
 
 
 def localizer_path(args: RobustnessConfig, city: int, training: str) -> Path:
-    return Path(args.out_dir) / "robustness" / f"localizer_{city}_{training}.npz"
+    """Where a city's localizer of a training is saved (a free daylight one apart)."""
+    free = "_free" if training == "daylight" and args.daylight_lanes == "free" else ""
+    return Path(args.out_dir) / "robustness" / f"localizer_{city}_{training}{free}.npz"
 
 
 def localizer_params(args: RobustnessConfig, training: str) -> dict[str, Any] | None:
@@ -240,7 +250,8 @@ def run_fit_task(task: FitTask) -> float:
     map_looks, looks = training_looks(task.training, args.randomised_map)
     loc = fit_looks(lambda c: _fit_env(args, task.city, c), task.city, map_looks, looks,
                     n_train=args.n_train if daylight else args.n_train_randomised,
-                    lanes="streets", n_drive=args.n_drive, seed=task.city,
+                    lanes=args.daylight_lanes if daylight else "streets",
+                    n_drive=args.n_drive, seed=task.city,
                     localizer_params=localizer_params(args, task.training))
     path = localizer_path(args, task.city, task.training)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -142,6 +142,10 @@ def held_out_label(cities: str) -> str:
         f"not the held-out {HELD_OUT_CITIES}: a run for choosing settings"
 
 
+_DAYLIGHT_POSES = {"streets": " around the lanes",
+                   "free": " over the whole street surface at every heading"}
+
+
 def markdown(result: dict[str, Any]) -> str:
     """The report: settings, the success matrix, every metric, the targets."""
     a = result["args"]
@@ -152,7 +156,8 @@ def markdown(result: dict[str, Any]) -> str:
             f"per row and city (reset seeds {a['seed']}..), truncation at {a['max_steps']} "
             f"steps, kidnap (or push: shoved 0.8-1.6 m sideways off the lane) at step "
             f"{a['kidnap_at']}; street-wide localizers: daylight "
-            f"({a.get('daylight_features', 'pixel_pca')}, {a['n_train']} images) for nominal, "
+            f"({a.get('daylight_features', 'pixel_pca')}, {a['n_train']} images"
+            f"{_DAYLIGHT_POSES[a.get('daylight_lanes', 'streets')]}) for nominal, "
             f"kidnap and push, randomised conditions "
             f"({a['randomised_features']}, {a['n_train_randomised']} "
             f"{_map_images(a.get('randomised_map', 'random'))}) for the presets; "

@@ -15,6 +15,7 @@ from localization.workflows.benchmarks.robustness import (
     RobustnessConfig,
     _summary,
     localizer_params,
+    localizer_path,
     make_env,
     run_robustness_bench,
     runs_condition,
@@ -106,6 +107,16 @@ def test_an_unknown_randomised_map_is_named() -> None:
         check(args)
 
 
+def test_a_free_daylight_localizer_has_its_own_file_and_a_checked_name() -> None:
+    streets, free = RobustnessConfig(), RobustnessConfig(daylight_lanes="free")
+    assert localizer_path(streets, 21, "daylight") != localizer_path(free, 21, "daylight")
+    assert localizer_path(streets, 21, "randomised") == localizer_path(free, 21, "randomised")
+    with pytest.raises(ValueError, match="daylight_lanes"):
+        RobustnessConfig(daylight_lanes="lanes").lists()
+    with pytest.raises(UsageError, match="--robustness-daylight-lanes"):
+        check(Args(only="robustness", robustness=RobustnessConfig(daylight_lanes="route")))
+
+
 def test_the_report_names_rows_where_the_robot_was_flipped() -> None:
     upright = {"episodes": 200, "tipped_over_episodes": 0.0}
     assert tipped_over_note({"summary": {"scripted/ekf/traffic": upright}}) == ""
@@ -131,8 +142,8 @@ def test_targets_from_rows() -> None:
                "scripted/ekf/traffic": {"success_rate": 0.5, "collisions_per_episode": 5.0,
                                         "traffic_collisions_per_episode": 1.5}}
     assert [t["target"] for t in targets(traffic) if "collisions" in t["target"]] == [
-        "scripted on ekf, traffic: collisions per episode (with moving objects: 1.50, "
-        "true pose 2.00)"]
+        ("scripted on ekf, traffic: collisions per episode (with moving objects: 1.50, "
+         "true pose 2.00)")]
 
 
 def test_parallel_episodes_equal_the_serial_run(tmp_path: Path) -> None:
