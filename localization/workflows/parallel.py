@@ -13,8 +13,10 @@ dataclasses or dicts holding seeds and settings) and returns the results in task
   ``"ray://host:port"`` (Ray Client) or ``"host:port"`` a remote one.
 
 Every task builds what it needs (an env from a seed) itself, so the results are the same
-for any number of workers. Each worker process uses one BLAS/OpenMP/torch thread (N workers
-on N cores, not N x N threads).
+for any number of workers. Each task runs on one BLAS/OpenMP/torch thread, in a worker (N
+workers on N cores, not N x N threads) and serially alike: torch's convolutions sum in
+another order on two threads than on one, which moved a closed-loop episode's belief by
+0.2 mm, so a serial run on torch's default threads did not equal a parallel one.
 """
 
 from __future__ import annotations
@@ -126,6 +128,27 @@ def limit_threads() -> None:
     _limited = True
 
 
+@contextmanager
+def one_thread() -> Iterator[None]:
+    """Run the block on one BLAS / OpenMP / torch thread, as a worker does (restored after;
+    torch is imported here if it is installed, since a task may import it later)."""
+    from threadpoolctl import threadpool_limits
+
+    try:
+        import torch
+    except ImportError:  # pragma: no cover - torch is a dependency
+        torch = None
+    old = torch.get_num_threads() if torch is not None else None
+    with threadpool_limits(1):
+        if torch is not None:
+            torch.set_num_threads(1)
+        try:
+            yield
+        finally:
+            if torch is not None:
+                torch.set_num_threads(old)
+
+
 def _call(fn: Callable[[T], R], task: T) -> R:
     """``fn(task)`` on one thread: what a worker (process or Ray task) runs."""
     limit_threads()
@@ -171,7 +194,8 @@ def map_tasks(fn: Callable[[T], R], tasks: Sequence[T], workers: int = 1,
         if address:
             return _map_ray(fn, tasks, workers, address, bar)
         if workers == 1 or len(tasks) <= 1:
-            return [_step(bar, fn(task)) for task in tasks]
+            with one_thread():  # as in a worker: the same sums, the same results
+                return [_step(bar, fn(task)) for task in tasks]
         return _map_processes(fn, tasks, workers, bar)
     finally:
         bar.close()

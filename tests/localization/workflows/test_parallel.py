@@ -60,6 +60,27 @@ def test_map_tasks_raises_the_task_error(workers: int) -> None:
         map_tasks(math.sqrt, [4.0, -1.0, 9.0], workers=workers, progress=False)
 
 
+def _torch_conv_threads(seed: int) -> tuple[int, bytes]:
+    """torch's thread count inside a task, and a convolution's output bytes."""
+    import torch
+
+    g = torch.Generator().manual_seed(seed)
+    x, w = torch.randn(4, 16, 32, 32, generator=g), torch.randn(32, 16, 3, 3, generator=g)
+    return torch.get_num_threads(), torch.nn.functional.conv2d(x, w).numpy().tobytes()
+
+
+def test_serial_tasks_run_on_one_thread_like_the_workers() -> None:
+    """Two threads sum a convolution in another order than one: a serial run on torch's
+    default threads gave other closed-loop episodes than a parallel one (by 0.2 mm)."""
+    import torch
+
+    torch.set_num_threads(2)
+    serial = map_tasks(_torch_conv_threads, [0, 1], workers=1, progress=False)
+    assert torch.get_num_threads() == 2  # restored after the run
+    assert [threads for threads, _ in serial] == [1, 1]
+    assert serial == map_tasks(_torch_conv_threads, [0, 1], workers=2, progress=False)
+
+
 def _split_fit(seed: int) -> None:
     """A GSE fit whose neighbourhood graph falls in two (a module-level task for workers)."""
     from localization.gse.embedding import GrassmannStiefelEigenmaps
