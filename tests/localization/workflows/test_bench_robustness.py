@@ -108,7 +108,9 @@ def test_an_unknown_randomised_map_is_named() -> None:
 
 
 def test_a_free_daylight_localizer_has_its_own_file_and_a_checked_name() -> None:
-    streets, free = RobustnessConfig(), RobustnessConfig(daylight_lanes="free")
+    streets, free = RobustnessConfig(daylight_lanes="streets"), RobustnessConfig()
+    assert free.daylight_lanes == "free" and free.resolved().daylight_lanes == "free"
+    assert RobustnessConfig(quick=True).resolved().daylight_lanes == "streets"
     assert localizer_path(streets, 21, "daylight") != localizer_path(free, 21, "daylight")
     assert localizer_path(streets, 21, "randomised") == localizer_path(free, 21, "randomised")
     with pytest.raises(ValueError, match="daylight_lanes"):
