@@ -162,7 +162,8 @@ def markdown(result: dict[str, Any]) -> str:
             f"({a['randomised_features']}, {a['n_train_randomised']} "
             f"{_map_images(a.get('randomised_map', 'random'))}) for the presets; "
             f"{'EKF with divergence detection; ' if a.get('detect_divergence') else ''}"
-            f"{result['seconds']:.0f} s ({result['fit_seconds']:.0f} s of fits).\n\n"
+            f"{result['seconds']:.0f} s ({result['fit_seconds']:.0f} s of fitting, summed "
+            "over the workers).\n\n"
             "\"as nominal\": the source never sees an image, so its episodes under a lighting "
             "or camera preset are the nominal ones; \"(x in N)\": the share that reached the "
             "goal within the agents' default N steps.\n\n")
