@@ -131,22 +131,17 @@ def limit_threads() -> None:
 @contextmanager
 def one_thread() -> Iterator[None]:
     """Run the block on one BLAS / OpenMP / torch thread, as a worker does (restored after;
-    torch is imported here if it is installed, since a task may import it later)."""
+    torch is imported here, since a task may import it later)."""
+    import torch
     from threadpoolctl import threadpool_limits
 
-    try:
-        import torch
-    except ImportError:  # pragma: no cover - torch is a dependency
-        torch = None
-    old = torch.get_num_threads() if torch is not None else None
+    old = torch.get_num_threads()
     with threadpool_limits(1):
-        if torch is not None:
-            torch.set_num_threads(1)
+        torch.set_num_threads(1)
         try:
             yield
         finally:
-            if torch is not None:
-                torch.set_num_threads(old)
+            torch.set_num_threads(old)
 
 
 def _call(fn: Callable[[T], R], task: T) -> R:

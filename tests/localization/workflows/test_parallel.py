@@ -74,9 +74,13 @@ def test_serial_tasks_run_on_one_thread_like_the_workers() -> None:
     default threads gave other closed-loop episodes than a parallel one (by 0.2 mm)."""
     import torch
 
+    before = torch.get_num_threads()
     torch.set_num_threads(2)
-    serial = map_tasks(_torch_conv_threads, [0, 1], workers=1, progress=False)
-    assert torch.get_num_threads() == 2  # restored after the run
+    try:
+        serial = map_tasks(_torch_conv_threads, [0, 1], workers=1, progress=False)
+        assert torch.get_num_threads() == 2  # restored after the run
+    finally:
+        torch.set_num_threads(before)
     assert [threads for threads, _ in serial] == [1, 1]
     assert serial == map_tasks(_torch_conv_threads, [0, 1], workers=2, progress=False)
 
