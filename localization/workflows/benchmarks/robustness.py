@@ -99,6 +99,7 @@ AGENTS = ("scripted", "ppo")
 SPECIAL = ("nominal", "kidnap", "push")
 KIDNAPS = ("kidnap", "push")  # the conditions with a kidnap at kidnap_at
 DAYLIGHT_LANES = ("streets", "free")  # training poses of the daylight localizer
+TRAININGS = ("daylight", "randomised")  # the two localizers of a city
 #: presets with moving things (the image-free sources run them too: collisions)
 MOVING = tuple(name for name, c in PRESETS.items() if c.vehicles or c.pedestrians)
 DEFAULT_CONDITIONS = ",".join([*SPECIAL, *(p for p in PRESETS if p != "default")])
@@ -154,6 +155,10 @@ class RobustnessConfig:
                 "ExperienceLocalizer; chosen on tuning cities 13-14), default (daylight "
                 "images) or random (every image its own look); its features and its noise "
                 "and calibration drives are under randomised conditions either way"})
+    moving_localizer: str = field(default="randomised", metadata={
+        "help": "localizer of the presets with moving things (traffic: vehicles and "
+                "pedestrians in today's daylight look): randomised (the presets' one) or "
+                "daylight (the nominal rows' one)"})
     n_drive: int = field(default=1500, metadata={"help": "steps of each noise-calibration drive"})
     max_steps: int = field(default=600, metadata={
         "help": "episode truncation (steps); 1.5x the agents' default 400: the longest "
@@ -189,6 +194,9 @@ class RobustnessConfig:
                  for k in ("cities", "conditions", "sources", "agents")}
         known = {"conditions": [*SPECIAL, *PRESETS], "sources": list(SOURCES),
                  "agents": list(AGENTS)}
+        if self.moving_localizer not in TRAININGS:
+            raise ValueError(f"robustness moving_localizer must be one of {TRAININGS}, got "
+                             f"{self.moving_localizer!r}")
         if self.daylight_lanes not in DAYLIGHT_LANES:
             raise ValueError(f"robustness daylight_lanes must be one of {DAYLIGHT_LANES}, got "
                              f"{self.daylight_lanes!r}")
@@ -200,9 +208,11 @@ class RobustnessConfig:
         return names
 
 
-def training_of(condition: str) -> str:
-    """The localizer a condition runs on: "daylight" for nominal, kidnap and push, else
-    "randomised"."""
+def training_of(condition: str, moving: str = "randomised") -> str:
+    """The localizer a condition runs on: "daylight" for nominal, kidnap and push, ``moving``
+    for the presets with moving things, else "randomised"."""
+    if condition in MOVING:
+        return moving
     return "daylight" if condition in SPECIAL else "randomised"
 
 
@@ -281,7 +291,7 @@ _LOCALIZERS: dict[Path, AppearanceLocalizer] = {}  # this worker's city's two lo
 
 
 def _localizer(args: RobustnessConfig, city: int, condition: str) -> AppearanceLocalizer:
-    path = localizer_path(args, city, training_of(condition))
+    path = localizer_path(args, city, training_of(condition, args.moving_localizer))
     if path not in _LOCALIZERS:
         if len(_LOCALIZERS) >= 2:  # a city's daylight and randomised localizers
             _LOCALIZERS.clear()
@@ -344,8 +354,14 @@ def task_path(task: RobustTask) -> Path:
     name = (f"{task.agent}_{task.source}_{task.condition}_{task.city}_{task.seeds[0]}-"
             f"{task.seeds[-1]}_{task.config.image_size}px_{task.config.max_steps}"
             f"{'_detect' if 'filter_options' in belief_options(task.config, task.source) else ''}"
-            ".json")
+            f"{_on_daylight(task)}.json")
     return Path(task.config.out_dir) / "robustness" / "episodes" / name
+
+
+def _on_daylight(task: RobustTask) -> str:
+    """A file-name mark of a row with moving things on the daylight localizer."""
+    moving = task.condition in MOVING and task.source != "oracle"
+    return "_daylight" if moving and task.config.moving_localizer == "daylight" else ""
 
 
 def load_task(task: RobustTask) -> list[Episode] | None:
@@ -373,15 +389,15 @@ def _rows(args: RobustnessConfig, names: dict[str, list[str]]) -> list[tuple[str
             if runs_condition(s, c)]
 
 
-def trainings_used(rows: list[tuple[str, str, str]]) -> list[str]:
+def trainings_used(rows: list[tuple[str, str, str]], moving: str = "randomised") -> list[str]:
     """The localizers (:func:`training_of`) the (agent, source, condition) rows use: the true
     pose needs none, dead reckoning a localizer's process noise."""
-    return sorted({training_of(c) for _, s, c in rows if s != "oracle"})
+    return sorted({training_of(c, moving) for _, s, c in rows if s != "oracle"})
 
 
 def _fit_all(args: RobustnessConfig, cities: list[int], rows: list[tuple[str, str, str]]
              ) -> float:
-    trainings = trainings_used(rows)
+    trainings = trainings_used(rows, args.moving_localizer)
     fits = [FitTask(args, city, t) for city in cities for t in trainings
             if not (args.reuse_localizers and localizer_path(args, city, t).exists())]
     seconds = map_tasks(run_fit_task, fits, workers=args.workers, ray_address=args.ray_address,
@@ -425,7 +441,7 @@ def run_robustness_bench(args: RobustnessConfig) -> dict[str, Any]:
     result = {"args": dataclasses.asdict(args), "machine": platform.platform(),
               "fit_seconds": round(fit_seconds, 1),
               "seconds": round(time.perf_counter() - t0, 1), "summary": summary,
-              "targets": targets(summary),
+              "targets": targets(summary, args.moving_localizer),
               "episodes": {k: as_records(v) for k, v in episodes.items()}}
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)

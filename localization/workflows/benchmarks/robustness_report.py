@@ -34,8 +34,10 @@ def _target(name: str, value: float, limit: str, ok: bool) -> dict[str, Any]:
     return {"target": name, "value": round(value, 3), "limit": limit, "pass": bool(ok)}
 
 
-def targets(summary: dict[str, dict[str, float]]) -> list[dict[str, Any]]:
-    """The issue's targets that the run's rows can decide (rows not run are left out)."""
+def targets(summary: dict[str, dict[str, float]], moving_localizer: str = "randomised"
+            ) -> list[dict[str, Any]]:
+    """The issue's targets that the run's rows can decide (rows not run are left out);
+    ``moving_localizer`` names the localizer of the presets with moving things."""
     out = []
 
     def success(key: str) -> float | None:
@@ -50,7 +52,9 @@ def targets(summary: dict[str, dict[str, float]]) -> list[dict[str, Any]]:
                            v >= TARGETS["scripted_kidnap_particles"]))
     for preset in PRESETS:
         if (v := success(f"scripted/ekf/{preset}")) is not None:
-            out.append(_target(f"scripted on the EKF belief, {preset} (randomised localizer): "
+            moving = PRESETS[preset].vehicles or PRESETS[preset].pedestrians
+            training = moving_localizer if moving else "randomised"
+            out.append(_target(f"scripted on the EKF belief, {preset} ({training} localizer): "
                                "success", v, f">= {TARGETS['scripted_preset']}",
                                v >= TARGETS["scripted_preset"]))
     out += _collision_targets(summary)
@@ -142,6 +146,7 @@ def held_out_label(cities: str) -> str:
         f"not the held-out {HELD_OUT_CITIES}: a run for choosing settings"
 
 
+_MOVING_ON = {"randomised": "", "daylight": " but traffic, which runs on the daylight one"}
 _DAYLIGHT_POSES = {"streets": " around the lanes",
                    "free": " over the whole street surface at every heading"}
 
@@ -160,7 +165,8 @@ def markdown(result: dict[str, Any]) -> str:
             f"{_DAYLIGHT_POSES[a.get('daylight_lanes', 'streets')]}) for nominal, "
             f"kidnap and push, randomised conditions "
             f"({a['randomised_features']}, {a['n_train_randomised']} "
-            f"{_map_images(a.get('randomised_map', 'random'))}) for the presets; "
+            f"{_map_images(a.get('randomised_map', 'random'))}) for the presets"
+            f"{_MOVING_ON[a.get('moving_localizer', 'randomised')]}; "
             f"{'EKF with divergence detection; ' if a.get('detect_divergence') else ''}"
             f"{result['seconds']:.0f} s ({result['fit_seconds']:.0f} s of fitting, summed "
             "over the workers).\n\n"
