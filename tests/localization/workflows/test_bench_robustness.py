@@ -61,6 +61,17 @@ def test_rows_on_the_true_pose_alone_fit_no_localizer() -> None:
                            ("scripted", "ekf", "traffic")]) == ["daylight", "randomised"]
 
 
+def test_traffic_can_run_on_the_daylight_localizer() -> None:
+    assert training_of("traffic", "daylight") == "daylight"
+    assert training_of("night", "daylight") == "randomised"
+    assert trainings_used([("scripted", "ekf", "traffic"), ("scripted", "ekf", "nominal")],
+                          "daylight") == ["daylight"]
+    with pytest.raises(ValueError, match="moving_localizer"):
+        RobustnessConfig(moving_localizer="night").lists()
+    label = targets({"scripted/ekf/traffic": {"success_rate": 1.0}}, "daylight")[0]["target"]
+    assert "traffic (daylight localizer)" in label
+
+
 def test_each_localizer_gets_its_own_features() -> None:
     plain = RobustnessConfig(daylight_features="pixel_pca")
     assert localizer_params(plain, "daylight") == {"features_params": {"n_components": 64}}
