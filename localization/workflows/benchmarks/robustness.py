@@ -76,6 +76,7 @@ from localization.workflows.benchmarks.appearance import fit_looks, training_loo
 from localization.workflows.benchmarks.robustness_report import (
     DEFAULT_STEPS,
     HELD_OUT_CITIES,
+    MOVING,
     markdown,
     targets,
 )
@@ -101,8 +102,6 @@ SPECIAL = ("nominal", "kidnap", "push")
 KIDNAPS = ("kidnap", "push")  # the conditions with a kidnap at kidnap_at
 DAYLIGHT_LANES = ("streets", "free")  # training poses of the daylight localizer
 TRAININGS = ("daylight", "randomised")  # the two localizers of a city
-#: presets with moving things (the image-free sources run them too: collisions)
-MOVING = tuple(name for name, c in PRESETS.items() if c.vehicles or c.pedestrians)
 DEFAULT_CONDITIONS = ",".join([*SPECIAL, *(p for p in PRESETS if p != "default")])
 
 

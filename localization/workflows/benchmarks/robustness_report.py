@@ -8,7 +8,7 @@ from agents.evaluation import METRIC_COLUMNS, metric_cells
 from agents.sources import agent_episode_steps
 from envs.conditions import PRESETS
 
-__all__ = ["DEFAULT_STEPS", "HELD_OUT_CITIES", "TARGETS", "held_out_label", "markdown", "targets"]
+__all__ = ["DEFAULT_STEPS", "HELD_OUT_CITIES", "MOVING", "TARGETS", "held_out_label", "markdown", "targets"]
 
 #: the agents' default episode limit in the default 20 m city (400 steps)
 DEFAULT_STEPS = agent_episode_steps(20.0)
@@ -19,6 +19,8 @@ HELD_OUT_CITIES = "21,22"
 TARGETS = {"scripted_nominal": 0.98, "scripted_kidnap_particles": 0.90,
            "scripted_preset": 0.90, "collision_margin": 0.02, "ppo_ratio": 0.97}
 BELIEFS = ("ekf", "particles")
+#: presets with moving things (the image-free sources run them too: collisions)
+MOVING = tuple(name for name, c in PRESETS.items() if c.vehicles or c.pedestrians)
 
 
 def _map_images(conditions: str) -> str:
@@ -52,8 +54,7 @@ def targets(summary: dict[str, dict[str, float]], moving_localizer: str = "rando
                            v >= TARGETS["scripted_kidnap_particles"]))
     for preset in PRESETS:
         if (v := success(f"scripted/ekf/{preset}")) is not None:
-            moving = PRESETS[preset].vehicles or PRESETS[preset].pedestrians
-            training = moving_localizer if moving else "randomised"
+            training = moving_localizer if preset in MOVING else "randomised"
             out.append(_target(f"scripted on the EKF belief, {preset} ({training} localizer): "
                                "success", v, f">= {TARGETS['scripted_preset']}",
                                v >= TARGETS["scripted_preset"]))
