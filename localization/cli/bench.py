@@ -68,13 +68,13 @@ from localization.workflows.benchmarks.global_loc import GlobalBenchConfig
 from localization.workflows.benchmarks.gse import GSEBenchConfig
 from localization.workflows.benchmarks.noise_models import NoiseBenchConfig
 from localization.workflows.benchmarks.parallel import ParallelBenchConfig
-from localization.workflows.benchmarks.robustness import AGENTS as ROBUST_AGENTS
-from localization.workflows.benchmarks.robustness import (
+from localization.workflows.benchmarks.robustness_config import AGENTS as ROBUST_AGENTS
+from localization.workflows.benchmarks.robustness_config import (
     DAYLIGHT_LANES,
     SPECIAL,
     RobustnessConfig,
 )
-from localization.workflows.benchmarks.robustness import SOURCES as ROBUST_SOURCES
+from localization.workflows.benchmarks.robustness_config import SOURCES as ROBUST_SOURCES
 from localization.workflows.benchmarks.street_features import FEATURES as STREET_FEATURES
 from localization.workflows.kidnap_eval import FILTERS
 from localization.workflows.parallel import check_ray_address

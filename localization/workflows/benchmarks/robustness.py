@@ -55,7 +55,7 @@ import dataclasses
 import json
 import platform
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -68,20 +68,28 @@ import numpy as np
 from agents.evaluation import Episode, as_records, run_episodes, summarize
 from agents.scripted import ScriptedAgent
 from agents.sources import make_pose_env
-from envs.conditions import PRESETS
 from envs.kidnapping import PUSH_DISTANCE
 from localization.loading import load_localizer
 from localization.localizer import AppearanceLocalizer
 from localization.workflows.benchmarks.appearance import fit_looks, training_looks
+from localization.workflows.benchmarks.robustness_config import (
+    AGENTS,
+    FILTERS,
+    KIDNAPS,
+    SOURCES,
+    SPECIAL,
+    RobustnessConfig,
+    runs_condition,
+    training_of,
+)
 from localization.workflows.benchmarks.robustness_report import (
     DEFAULT_STEPS,
-    HELD_OUT_CITIES,
     MOVING,
     markdown,
     targets,
 )
 from localization.workflows.benchmarks.street_features import localizer_features
-from localization.workflows.parallel import RAY_ADDRESS_HELP, WORKERS_HELP, map_tasks, worker_env
+from localization.workflows.parallel import map_tasks, worker_env
 
 __all__ = [
     "AGENTS",
@@ -92,139 +100,6 @@ __all__ = [
     "run_robust_task",
     "run_robustness_bench",
 ]
-
-#: the pose sources of the rows; "ekf" and "particles" are the belief with that filter
-SOURCES = ("oracle", "ekf", "particles", "dead_reckoning")
-FILTERS = {"ekf": "ekf", "particles": "particles"}
-AGENTS = ("scripted", "ppo")
-#: conditions that are not a preset of envs.conditions
-SPECIAL = ("nominal", "kidnap", "push")
-KIDNAPS = ("kidnap", "push")  # the conditions with a kidnap at kidnap_at
-DAYLIGHT_LANES = ("streets", "free")  # training poses of the daylight localizer
-TRAININGS = ("daylight", "randomised")  # the two localizers of a city
-DEFAULT_CONDITIONS = ",".join([*SPECIAL, *(p for p in PRESETS if p != "default")])
-
-
-@dataclass
-class RobustnessConfig:
-    """Settings of the robustness benchmark."""
-
-    cities: str = field(default=HELD_OUT_CITIES, metadata={
-        "help": "comma-separated scene seeds: the held-out 21,22 (never used to tune "
-                "anything), or tuning cities for a run that chooses settings"})
-    conditions: str = field(default=DEFAULT_CONDITIONS, metadata={
-        "help": "comma-separated: nominal, kidnap, push and appearance presets "
-                "(envs.conditions)"})
-    sources: str = field(default=",".join(SOURCES), metadata={
-        "help": "comma-separated pose sources: " + ", ".join(SOURCES)})
-    agents: str = field(default="scripted,ppo", metadata={
-        "help": "comma-separated: scripted, ppo (ppo runs when both policies are given)"})
-    oracle_policy: str = field(default="", metadata={
-        "help": "PPO policy.pt trained on the true pose (appearance-nav train or the agents "
-                "benchmark); empty: no PPO rows"})
-    belief_policy: str = field(default="", metadata={
-        "help": "PPO policy.pt trained on the belief, run on every other source; empty: no "
-                "PPO rows"})
-    episodes: int = field(default=100, metadata={"help": "episodes per row and city"})
-    seed: int = field(default=3_000_000, metadata={"help": "first reset seed"})
-    kidnap_at: int = field(default=40, metadata={
-        "help": "step of the kidnap ('kidnap' rows) and of the push ('push' rows)"})
-    image_size: int = field(default=64, metadata={"help": "square image side (px)"})
-    motion_noise: float = field(default=0.1, metadata={"help": "env actuation noise"})
-    n_train: int = field(default=40000, metadata={
-        "help": "training images of the daylight localizer"})
-    daylight_lanes: str = field(default="free", metadata={
-        "help": "training poses of the daylight localizer: free (the whole street surface at "
-                "every heading, lanes='free' of fit_city_localizer; on tuning cities 13-16, "
-                "40000 images, pushed robots 0.99 success and 1.05 contact steps per episode "
-                "against 0.94 and 1.75 with streets) or streets (a tube around the lanes of "
-                "every street, both ways; 10000 images suffice)"})
-    n_train_randomised: int = field(default=16000, metadata={
-        "help": "street training images of the randomised-conditions localizer"})
-    daylight_features: str = field(default="small_cnn", metadata={
-        "help": "features of the daylight localizer: small_cnn (the packaged SmallCNN of random "
-                "views of other cities, whole image, PCA 64; benchmarks/street_features.py) or "
-                "pixel_pca (the localizer's default); chosen on tuning cities 13-16"})
-    randomised_features: str = field(default="small_cnn", metadata={
-        "help": "features of the randomised localizer: small_cnn (the packaged SmallCNN trained "
-                "under randomised conditions on cities 100-119, PCA 64) or pixel_pca (the "
-                "localizer's default PixelPCA); chosen on tuning city 11"})
-    randomised_map: str = field(default="experiences", metadata={
-        "help": "conditions of the randomised localizer's map images: experiences (one map "
-                "per look: daylight and a draw of each other lighting family, "
-                "ExperienceLocalizer; chosen on tuning cities 13-14), default (daylight "
-                "images) or random (every image its own look); its features and its noise "
-                "and calibration drives are under randomised conditions either way"})
-    moving_localizer: str = field(default="randomised", metadata={
-        "help": "localizer of the presets with moving things (traffic: vehicles and "
-                "pedestrians in today's daylight look): randomised (the presets' one) or "
-                "daylight (the nominal rows' one). On tuning cities 13-14 the scripted agent "
-                "does better on randomised (on daylight: particle belief > 1 m off in 49 of "
-                "200 episodes against 12), PPO, which leaves the lanes, on daylight (success "
-                "0.96 / 0.97 on the EKF / particles against 0.84 / 0.80)"})
-    n_drive: int = field(default=1500, metadata={"help": "steps of each noise-calibration drive"})
-    max_steps: int = field(default=600, metadata={
-        "help": "episode truncation (steps); 1.5x the agents' default 400: the longest "
-                "street paths of a 20 m city take the true-pose agent up to 375 steps, so at "
-                "400 any slow-down times out (success within 400 is reported beside it)"})
-    detect_divergence: bool = field(default=False, metadata={
-        "help": "the EKF rows' belief notices when it is lost (BeliefFilter's "
-                "detect_divergence, as in the agents benchmark); off: the plain EKF"})
-    workers: int = field(default=1, metadata={"help": WORKERS_HELP})
-    ray_address: str = field(default="", metadata={"help": RAY_ADDRESS_HELP})
-    reuse_localizers: bool = field(default=False, metadata={
-        "help": "resume: use the localizers and finished episodes an earlier run saved under "
-                "<out-dir>/robustness/ (same settings) instead of fitting and running them again"})
-    quick: bool = field(default=False, metadata={"help": "smoke run: one city, tiny fits"})
-    out_dir: str = field(default="results", metadata={
-        "help": "where bench_robustness.json/.md and the localizers go"})
-
-    def resolved(self) -> RobustnessConfig:
-        """The settings actually run (``quick``: one city, three conditions, small fits, one
-        daylight map for the presets)."""
-        if not self.quick:
-            return self
-        return dataclasses.replace(
-            self, cities=self.cities.split(",")[0], conditions="nominal,kidnap,night",
-            episodes=2, image_size=32, n_train=600, n_train_randomised=600, n_drive=400,
-            daylight_lanes="streets",
-            max_steps=60, kidnap_at=10, daylight_features="pixel_pca",
-            randomised_features="pixel_pca", randomised_map="default")
-
-    def lists(self) -> dict[str, list[str]]:
-        """cities, conditions, sources and agents as checked lists of names."""
-        names = {k: [s.strip() for s in getattr(self, k).split(",") if s.strip()]
-                 for k in ("cities", "conditions", "sources", "agents")}
-        known = {"conditions": [*SPECIAL, *PRESETS], "sources": list(SOURCES),
-                 "agents": list(AGENTS)}
-        if self.moving_localizer not in TRAININGS:
-            raise ValueError(f"robustness moving_localizer must be one of {TRAININGS}, got "
-                             f"{self.moving_localizer!r}")
-        if self.daylight_lanes not in DAYLIGHT_LANES:
-            raise ValueError(f"robustness daylight_lanes must be one of {DAYLIGHT_LANES}, got "
-                             f"{self.daylight_lanes!r}")
-        for key, allowed in known.items():
-            bad = [n for n in names[key] if n not in allowed]
-            if bad or not names[key]:
-                raise ValueError(f"robustness {key} must be a comma-separated list of {allowed}, "
-                                 f"got {getattr(self, key)!r}")
-        return names
-
-
-def training_of(condition: str, moving: str = "randomised") -> str:
-    """The localizer a condition runs on: "daylight" for nominal, kidnap and push, ``moving``
-    for the presets with moving things, else "randomised"."""
-    if condition in MOVING:
-        return moving
-    return "daylight" if condition in SPECIAL else "randomised"
-
-
-def runs_condition(source: str, condition: str) -> bool:
-    """Whether the (source, condition) row is run: sources without images skip the presets
-    that change only the images."""
-    image_free = source in ("oracle", "dead_reckoning")
-    return not image_free or condition in SPECIAL or condition in MOVING
-
 
 def localizer_path(args: RobustnessConfig, city: int, training: str) -> Path:
     """Where a city's localizer of a training is saved (a free daylight one apart)."""
