@@ -1,6 +1,11 @@
 """PixelPCA: raw pixels in [0, 1] -> PCA, the classical appearance-based baseline, with an
 optional per-image illumination normalisation (issue 14: the same place at dusk, at night or
-over-exposed should give nearby features)."""
+over-exposed should give nearby features).
+
+The "patches" normalisation is SeqSLAM's patch normalisation (Milford & Wyeth 2012, "SeqSLAM:
+Visual route-based navigation for sunny summer days and stormy winter nights"): every patch of
+``patch_size`` x ``patch_size`` pixels is standardized on its own, so a light that changes over
+the picture (a low sun, a headlight, street lamps) cancels where a per-image gain cannot."""
 
 from __future__ import annotations
 
@@ -8,14 +13,14 @@ from typing import Any
 
 import numpy as np
 
-from localization._validation import check_choice, check_int
+from localization._validation import check_choice, check_int, check_real
 from localization.features._pca import fit_pca, pca_from_state, pca_project, pca_state
 from localization.features.base import FeatureExtractor
 
-__all__ = ["NORMALIZATIONS", "PixelPCA", "normalize_pixels"]
+__all__ = ["NORMALIZATIONS", "PixelPCA", "normalize_patches", "normalize_pixels"]
 
 #: the values of ``PixelPCA(normalize=...)``
-NORMALIZATIONS = ("none", "standardize", "channels", "equalize")
+NORMALIZATIONS = ("none", "standardize", "channels", "equalize", "patches")
 _EPS = np.float32(1e-3)
 
 
@@ -31,7 +36,9 @@ def normalize_pixels(x: np.ndarray, how: str, channels: int) -> np.ndarray:
         (a global gain and offset cancel: exposure, dimmer light); "channels": the same per
         colour channel (also a colour cast cancels: dusk, seasons); "equalize": every channel
         replaced by the ranks of its values scaled to [0, 1] (histogram equalisation: any
-        increasing change of brightness cancels), then standardized.
+        increasing change of brightness cancels), then standardized; "patches": as
+        "standardize" (the patches themselves are normalized on the image by
+        :func:`normalize_patches` before the pixels are flattened).
     channels : int — 3 for colour, 1 for grey.
 
     Returns
@@ -41,7 +48,7 @@ def normalize_pixels(x: np.ndarray, how: str, channels: int) -> np.ndarray:
     if how == "none":
         return x
     n = len(x)
-    if how == "standardize":
+    if how in ("standardize", "patches"):
         z = x - x.mean(axis=1, keepdims=True)
         return z / (z.std(axis=1, keepdims=True) + _EPS)
     c = x.reshape(n, -1, channels)
@@ -50,6 +57,35 @@ def normalize_pixels(x: np.ndarray, how: str, channels: int) -> np.ndarray:
         c = ranks.astype(np.float32) / np.float32(max(c.shape[1] - 1, 1))
     z = c - c.mean(axis=1, keepdims=True)
     return (z / (z.std(axis=1, keepdims=True) + _EPS)).reshape(n, -1)
+
+
+def normalize_patches(x: np.ndarray, size: int, floor: float) -> np.ndarray:
+    """Standardize every ``size`` x ``size`` patch of every image and channel on its own.
+
+    ``z = (x - mean_patch) / (std_patch + floor)``; the last row and column of patches are
+    smaller when ``size`` does not divide H or W.
+
+    Parameters
+    ----------
+    x : (n, H, W, C) float32 — pixels in [0, 1].
+    size : int — patch side (px).
+    floor : float — added to each patch's standard deviation: a flat patch stays near 0
+        instead of blowing its quantisation noise up to unit variance.
+
+    Returns
+    -------
+    (n, H, W, C) float32
+    """
+    rows, cols = np.arange(0, x.shape[1], size), np.arange(0, x.shape[2], size)
+
+    def block_mean(v: np.ndarray) -> np.ndarray:
+        sums = np.add.reduceat(np.add.reduceat(v, rows, axis=1), cols, axis=2)
+        counts = np.outer(np.diff(rows, append=x.shape[1]), np.diff(cols, append=x.shape[2]))
+        mean = sums / counts[None, :, :, None].astype(np.float32)
+        return np.repeat(np.repeat(mean, size, axis=1), size, axis=2)[:, :x.shape[1], :x.shape[2]]
+
+    z = x - block_mean(x)
+    return z / (np.sqrt(block_mean(z * z)) + np.float32(floor))
 
 
 class PixelPCA(FeatureExtractor):
@@ -68,9 +104,15 @@ class PixelPCA(FeatureExtractor):
     mask : array_like of bool, shape (H, W), or None
         Use only these pixels (e.g. those looking above the near ground, whose texture
         moves fast and repeats); None uses all.
-    normalize : {"none", "standardize", "channels", "equalize"}
+    normalize : {"none", "standardize", "channels", "equalize", "patches"}
         Per-image illumination normalisation of the (masked) pixels before the PCA
-        (:func:`normalize_pixels`); "none" (default) keeps the raw pixels.
+        (:func:`normalize_pixels`); "none" (default) keeps the raw pixels; "patches"
+        standardizes every patch on its own (:func:`normalize_patches`, before the mask).
+    patch_size : int
+        Patch side (px) of ``normalize="patches"``.
+    patch_floor : float
+        Added to each patch's standard deviation (pixel values in [0, 1]) by
+        ``normalize="patches"``.
 
     Attributes
     ----------
@@ -84,30 +126,37 @@ class PixelPCA(FeatureExtractor):
 
     def __init__(self, n_components: int = 64, grayscale: bool = False, whiten: bool = False,
                  random_state: int | None = 0, mask: Any = None,
-                 normalize: str = "none") -> None:
+                 normalize: str = "none", patch_size: int = 8,
+                 patch_floor: float = 0.001) -> None:
         self.n_components = n_components
         self.grayscale = grayscale
         self.whiten = whiten
         self.random_state = random_state
         self.mask = mask
         self.normalize = normalize
+        self.patch_size = patch_size
+        self.patch_floor = patch_floor
 
     def _pixels(self, images: np.ndarray) -> np.ndarray:
+        x = images.astype(np.float32) / np.float32(255.0)
+        if self.grayscale:
+            x = (x @ np.array([0.299, 0.587, 0.114], dtype=np.float32))[..., None]
+        if self.normalize == "patches":
+            x = normalize_patches(x, int(self.patch_size), float(self.patch_floor))
         if self.mask is not None:
             mask = np.asarray(self.mask, dtype=bool)
             if mask.shape != images.shape[1:3] or not mask.any():
                 raise ValueError(f"mask must be a non-empty boolean (H, W) = "
                                  f"{images.shape[1:3]} array, got shape {mask.shape}")
-            images = images[:, mask]  # (n, n_pixels, 3)
-        x = images.astype(np.float32) / np.float32(255.0)
-        if self.grayscale:
-            x = x @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
+            x = x[:, mask]  # (n, n_pixels, channels)
         return normalize_pixels(x.reshape(len(x), -1), self.normalize,
                                 1 if self.grayscale else 3)
 
     def _fit(self, images: np.ndarray, y: Any = None) -> None:
         check_int(self.n_components, "n_components", low=1)
         check_choice(self.normalize, "normalize", NORMALIZATIONS)
+        check_int(self.patch_size, "patch_size", low=1)
+        check_real(self.patch_floor, "patch_floor", low=0.0, low_open=True)
         self.pca_ = fit_pca(self._pixels(images), self.n_components, self.whiten,
                             self.random_state)
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from localization.features.pixel_pca import NORMALIZATIONS, PixelPCA, normalize_pixels
+from localization.features.pixel_pca import (NORMALIZATIONS, PixelPCA, normalize_patches,
+                                            normalize_pixels)
 
 
 @pytest.fixture(scope="module")
@@ -58,3 +59,54 @@ def test_normalize_is_saved_in_the_state(images):
 def test_unknown_normalize_is_named(images, bad, exc):
     with pytest.raises(exc, match="normalize"):
         PixelPCA(n_components=4, normalize=bad).fit(images)
+
+
+def light_gradient(images, left=0.9, right=0.3):
+    """A light that falls off across the picture (a low sun, a headlight): a gain per column."""
+    gain = np.linspace(left, right, images.shape[2])[None, None, :, None]
+    return np.clip(np.round(images * gain), 0, 255).astype(np.uint8)
+
+
+def test_patches_cancel_a_light_that_changes_over_the_picture(images):
+    ref = PixelPCA(n_components=8, normalize="patches", patch_size=4).fit(images)
+    whole = PixelPCA(n_components=8, normalize="channels").fit(images)
+    changed = light_gradient(images)
+    err = {name: np.linalg.norm(m.transform(images) - m.transform(changed), axis=1).mean()
+           / np.linalg.norm(m.transform(images), axis=1).mean()
+           for name, m in [("patches", ref), ("channels", whole)]}
+    assert err["patches"] < 0.1
+    assert err["channels"] > 2 * err["patches"]
+
+
+def test_normalize_patches_moments_and_ragged_edges():
+    x = np.random.default_rng(2).uniform(0, 1, (3, 10, 13, 3)).astype(np.float32)
+    z = normalize_patches(x, 4, 1e-6)
+    assert z.shape == x.shape and z.dtype == np.float32
+    for r, c in [(slice(0, 4), slice(0, 4)), (slice(8, 10), slice(12, 13)),
+                 (slice(4, 8), slice(12, 13))]:  # whole, corner and edge patches
+        block = z[:, r, c]
+        assert np.allclose(block.mean(axis=(1, 2)), 0, atol=1e-4)
+        if block[0].size // 3 > 1:
+            assert np.allclose(block.std(axis=(1, 2)), 1, atol=1e-3)
+    flat = normalize_patches(np.full((1, 8, 8, 1), 0.5, np.float32), 4, 1e-3)
+    assert np.all(flat == 0)  # a flat patch stays 0: the floor, not 0 / 0
+
+
+def test_patches_settings_are_saved_and_masks_apply_after_them(images):
+    mask = np.zeros(images.shape[1:3], bool)
+    mask[:6] = True
+    fitted = PixelPCA(n_components=4, normalize="patches", patch_size=3, patch_floor=0.01,
+                      grayscale=True, mask=mask).fit(images)
+    again = PixelPCA.from_state(fitted.get_state())
+    assert (again.patch_size, again.patch_floor) == (3, 0.01)
+    assert np.array_equal(again.transform(images), fitted.transform(images))
+
+
+@pytest.mark.parametrize("params, exc", [({"patch_size": 0}, ValueError),
+                                         ({"patch_size": 2.5}, TypeError),
+                                         ({"patch_floor": 0.0}, ValueError),
+                                         ({"patch_floor": float("nan")}, ValueError),
+                                         ({"patch_floor": "small"}, TypeError)])
+def test_bad_patch_settings_are_named(images, params, exc):
+    with pytest.raises(exc, match=next(iter(params))):
+        PixelPCA(n_components=4, normalize="patches", **params).fit(images)
