@@ -5,8 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from localization.features.pixel_pca import (NORMALIZATIONS, PixelPCA, normalize_patches,
-                                            normalize_pixels)
+from localization.features.pixel_pca import (
+    NORMALIZATIONS,
+    PixelPCA,
+    normalize_patches,
+    normalize_pixels,
+)
 
 
 @pytest.fixture(scope="module")
