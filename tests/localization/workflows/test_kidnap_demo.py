@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from localization.workflows.kidnap_demo import kidnap_demo
 
@@ -33,9 +34,28 @@ def test_appearance_stage_drives_the_route_at_dusk_on_the_daylight_localizer(loc
     from localization.workflows.demo import DemoConfig, _appearance
 
     args = DemoConfig(image_size=32, motion_noise=0.05, steps=60, seed=3, dusk="dusk",
-                      out=str(tmp_path))
-    row = _appearance(args, localizer, tmp_path)
+                      dusk_map=False, out=str(tmp_path))
+    [row] = _appearance(args, localizer, tmp_path)
     assert (tmp_path / "track_dusk.png").stat().st_size > 10_000
     assert row["measurement"] == "representation, dusk" and row["steps"] == 60
     assert np.isfinite(row["rmse"]) and np.isfinite(row["rmse_dead_reckoning"])
     assert 0.0 <= row["accepted"] <= 1.0
+
+
+@pytest.mark.filterwarnings("ignore::localization.workflows.quality.LocalizerQualityWarning")
+def test_appearance_stage_also_drives_a_patch_normalised_route_map(localizer, tmp_path,
+                                                                   monkeypatch):
+    from localization.workflows import demo
+
+    small = {"n_train": 800, "lanes": "route", "n_drive": 200,
+             "localizer_params": {"features_params": {"n_components": 16,
+                                                      "normalize": "patches"}}}
+    monkeypatch.setattr(demo, "DUSK_MAP", small)
+    args = demo.DemoConfig(image_size=32, motion_noise=0.05, steps=60, seed=3, dusk="night",
+                           out=str(tmp_path))
+    rows = demo._appearance(args, localizer, tmp_path)
+    assert [r["measurement"] for r in rows] == [
+        "representation, night",
+        "representation, night (a daylight route map, patch-normalised)"]
+    assert (tmp_path / "track_night_patches.png").stat().st_size > 10_000
+    assert all(r["steps"] == 60 and np.isfinite(r["rmse"]) for r in rows)
