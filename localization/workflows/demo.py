@@ -58,7 +58,7 @@ from localization.workflows.tracking import fit_city_localizer, track_metrics, t
 __all__ = ["DUSK_MAP", "DemoConfig", "demo_table", "run_demo"]
 
 #: the appearance stage's daylight map of the route: the appearance benchmark's features
-#: (PixelPCA(128) on 8 x 8 patch-normalised pixels, chosen on tuning cities 11-14), fewer
+#: (PixelPCA(128) on 8 x 8 patch-normalised pixels, chosen on tuning cities 11-12, checked on 13-14), fewer
 #: images, the noise of the one measurement model the stage drives
 DUSK_MAP = {"n_train": 6000, "lanes": "route", "n_drive": 1500,
             "measurements": ("representation",),
@@ -142,13 +142,19 @@ def _video(args: DemoConfig, loc: AppearanceLocalizer, out: Path, seconds: dict)
     return video
 
 
+def _env(args: DemoConfig, conditions: str | None = None) -> gym.Env:
+    """The demo's city and camera in the look ``conditions`` (None: today's), without a step
+    limit."""
+    return gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, camera=args.camera,
+                    conditions=conditions, image_size=(args.image_size, args.image_size),
+                    motion_noise=args.motion_noise, max_episode_steps=None)
+
+
 def _appearance(args: DemoConfig, loc: AppearanceLocalizer, out: Path) -> list[dict]:
     """The appearance stage: the tracking route under ``args.dusk`` on the daylight
     localizer ("representation" model), as the tracking stage drives it in daylight; with
     ``args.dusk_map`` also on a daylight map of the route with patch-normalised features."""
-    env = gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, camera=args.camera,
-                   conditions=args.dusk, image_size=(args.image_size, args.image_size),
-                   motion_noise=args.motion_noise, max_episode_steps=None)
+    env = _env(args, args.dusk)
     try:
         maps = [("", "the localizer fitted in daylight", loc)]
         if args.dusk_map:
@@ -162,9 +168,7 @@ def _appearance(args: DemoConfig, loc: AppearanceLocalizer, out: Path) -> list[d
 
 def _dusk_map(args: DemoConfig) -> AppearanceLocalizer:
     """A daylight map of the route with patch-normalised features (:data:`DUSK_MAP`)."""
-    day = gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, camera=args.camera,
-                   image_size=(args.image_size, args.image_size),
-                   motion_noise=args.motion_noise, max_episode_steps=None)
+    day = _env(args)
     try:
         with warnings.catch_warnings():  # GSE's eigen-gap warning on a thin tube of poses
             warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
@@ -192,9 +196,7 @@ def run_demo(args: DemoConfig) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     seconds = {}
-    env = gym.make("AppearanceNav-v0", scene_seed=args.scene_seed, camera=args.camera,
-                   image_size=(args.image_size, args.image_size),
-                   motion_noise=args.motion_noise, max_episode_steps=None)
+    env = _env(args)
     images, poses = envs.collect_dataset(env, args.n_route, "route", seed=args.seed)
     dataset = envs.save_dataset(out / "route_dataset.npz", images, poses,
                                 **dataclasses.asdict(args), dt=env.unwrapped.dt)

@@ -153,7 +153,7 @@ class AppearanceBenchConfig:
     normalize: str = field(default="patches", metadata={
         "help": "PixelPCA illumination normalisation (localization.features.pixel_pca): "
                 "'patches' (8 x 8 patches, floor 0.001) chosen over 'channels' on tuning "
-                "cities 11-12 (daylight map, percent within the three thresholds, at dusk 72 / 94 / 99 against 47 / 65 / 72, at "
+                "cities 11-12 (daylight map, both with 128 components, percent within the three thresholds, at dusk 72 / 94 / 99 against 47 / 65 / 72, at "
                 "night 64 / 86 / 96 against 0 / 0 / 0)"})
     n_test: int = field(default=300, metadata={"help": "single test images per city and condition"})
     n_drives: int = field(default=2, metadata={"help": "closed-loop drives per city and condition"})

@@ -101,6 +101,7 @@ __all__ = [
     "run_robustness_bench",
 ]
 
+
 def localizer_path(args: RobustnessConfig, city: int, training: str) -> Path:
     """Where a city's localizer of a training is saved (a free daylight one apart)."""
     free = "_free" if training == "daylight" and args.daylight_lanes == "free" else ""
