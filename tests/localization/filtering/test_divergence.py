@@ -74,8 +74,48 @@ def test_an_accepted_image_breaks_the_sustained_run():
     assert all(v.restart is None for v in feed(m, 11, 40.0, FAR, True))
 
 
+SIDEWAYS = np.array([0.0, 1.2, 0.0])  # psi* 1.2 m beside the belief: a shove, not a kidnap
+
+
+def test_psi_agreeing_a_little_off_the_belief_is_a_drift():
+    """Accepted images (NIS 4) whose psi* agree 1.2 m beside the belief: after drift_steps
+    of them the verdict names that place, doubtful but not lost; then it needs fresh
+    evidence before it fires again."""
+    m = DivergenceMonitor(drift_steps=4)
+    feed(m, 8, 1.5, NEAR, False)
+    verdicts = feed(m, 8, 4.0, SIDEWAYS, False)
+    fired = [i for i, v in enumerate(verdicts) if v.drift is not None]
+    assert fired == [3, 7]
+    np.testing.assert_allclose(verdicts[3].drift, SIDEWAYS, atol=1e-9)
+    assert verdicts[3].doubtful and not verdicts[3].lost and verdicts[3].restart is None
+    assert not verdicts[2].doubtful
+
+
+@pytest.mark.parametrize("psis", [
+    [SIDEWAYS, -SIDEWAYS],  # psi* scattered on both sides: no place agreed on
+    [FAR],  # 6 m off: the lost and restart tests' case, never a widening towards it
+    [SIDEWAYS, SIDEWAYS, SIDEWAYS, NEAR],  # one of the last four agrees with the belief
+])
+def test_no_drift_without_agreement_a_little_off(psis):
+    m = DivergenceMonitor(drift_steps=4)
+    verdicts = [feed(m, 1, 4.0, psis[t % len(psis)], False)[0] for t in range(16)]
+    assert all(v.drift is None for v in verdicts)
+
+
+def test_drift_test_can_be_switched_off():
+    m = DivergenceMonitor(drift_distance=None)
+    assert all(v.drift is None for v in feed(m, 12, 4.0, SIDEWAYS, False))
+
+
+def test_drift_steps_beyond_the_window_are_refused():
+    with pytest.raises(ValueError, match="drift_steps"):
+        DivergenceMonitor(window=4, drift_steps=6)
+
+
 @pytest.mark.parametrize("name, value", [("strong_nis", 0.0), ("strong_steps", 0),
-                                         ("sustained_steps", 0), ("doubt_nis", np.nan)])
+                                         ("sustained_steps", 0), ("doubt_nis", np.nan),
+                                         ("drift_distance", 0.0), ("drift_heading", -1.0),
+                                         ("drift_steps", 1)])
 def test_bad_settings_are_named(name, value):
     with pytest.raises((ValueError, TypeError), match=name):
         DivergenceMonitor(**{name: value})
@@ -350,3 +390,22 @@ def test_a_start_at_a_look_alike_starts_again_at_a_later_image(localizer, drive)
     assert "relocalized" in statuses[:TRIAL_STEPS], statuses
     assert np.hypot(*(f.x[:2] - poses[n][:2])) < 0.5
     assert beliefs[-1] == "tracking"
+
+
+@pytest.mark.parametrize("shift", [1.2, -1.0])
+def test_a_belief_shoved_beside_the_truth_is_widened_back(localizer, drive, shift):
+    """The belief moved ``shift`` m sideways at START (what a push does to the robot, the
+    other way round): the representation measurements still pass the gate and, with P 0.1 m
+    wide, move it a centimetre a step (0.9 m off ten steps later, measured); the drift test
+    widens P towards psi* and the images bring it back (0.1 m, measured)."""
+    images, poses, controls = drive
+    W = localizer.transform(images)
+    errors = {}
+    for name, detect in (("drift", True), ("no drift", {"drift_distance": None})):
+        f = _tracking(localizer, W, drive, detect_divergence=detect)
+        yaw = f.ekf.x[2]
+        f.ekf.x = f.ekf.x + shift * np.array([-np.sin(yaw), np.cos(yaw), 0.0])
+        for t in range(START, START + 10):
+            f.step(controls[t - 1], W[t])
+        errors[name] = float(np.hypot(*(f.x[:2] - poses[START + 9][:2])))
+    assert errors["drift"] < 0.3 and errors["no drift"] > 0.6, errors
