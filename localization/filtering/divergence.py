@@ -26,7 +26,9 @@ their evidence:
   disagreeing (beyond that is the lost and restart tests' case: widening P metres towards
   an aliased place would let its measurements through), and within
   ``drift_distance`` / ``drift_heading`` of their own mean: the images agree on a place a
-  little off the belief, while its measurements may still pass the gate. A robot shoved
+  little off the belief, while its measurements may still pass the gate. Each of them from
+  a new view: a robot at rest (zero control) sees one image again and again, and a psi*
+  0.5 m off repeated is one error, not four. A robot shoved
   sideways (``envs.kidnapping``'s push) is the case: on tuning city 14 a belief 1.3 m off
   with position std 0.13 m accepted every representation measurement (NIS 3-9) and crept back
   at 3 cm a step while psi* was within 0.3 m of the truth. The filter then widens P towards
@@ -149,6 +151,10 @@ class DivergenceMonitor:
         The same in radians of heading.
     drift_steps : int
         Consecutive in-domain psi* values the drift test needs (>= 2).
+    drift_only : bool
+        Run the drift test alone: never "lost", no restart, "doubtful" only on a drift (the
+        particle belief's :class:`~localization.filtering.mode_tracker.ModeTracker`, whose
+        EKF the particles restart).
     sustained_steps : int
         Rejected, disagreeing measurements in a row that restart the belief whatever their
         NIS (>= 1).
@@ -163,7 +169,7 @@ class DivergenceMonitor:
                  doubt_nis: float = 100.0, strong_nis: float = 500.0,
                  strong_steps: int = 4, sustained_steps: int = 12,
                  drift_distance: float | None = 0.5, drift_heading: float = 0.2,
-                 drift_steps: int = 4) -> None:
+                 drift_steps: int = 4, drift_only: bool = False) -> None:
         self.window = check_int(window, "window", low=2)
         self.nis_prob = check_real(nis_prob, "nis_prob", low=0.0, high=1.0, low_open=True,
                                    high_open=True)
@@ -189,6 +195,9 @@ class DivergenceMonitor:
             drift_distance, "drift_distance", low=0.0, low_open=True)
         self.drift_heading = check_real(drift_heading, "drift_heading", low=0.0, low_open=True)
         self.drift_steps = check_int(drift_steps, "drift_steps", low=2)
+        if not isinstance(drift_only, (bool, np.bool_)):
+            raise TypeError(f"drift_only must be a bool, got {drift_only!r}")
+        self.drift_only = bool(drift_only)
         if self.drift_steps > self.window:
             raise ValueError(f"drift_steps ({drift_steps}) must not exceed window ({window}): "
                              "the monitor keeps psi* for window steps")
@@ -204,9 +213,14 @@ class DivergenceMonitor:
         self._proposals = np.zeros((0, 3))
         self._ages: list[int] = []
         self._drift_wait = 0  # steps until the drift test may fire again
+        self._moved = False  # a control was commanded since the last step
+        self._views: deque[bool] = deque(maxlen=self.window)  # psi* from a new view, per step
 
     def move_proposals(self, motion_model: Any, u: Array) -> None:
-        """Move the stored proposals to the present: ``F(p, k U)`` (u already scaled by k)."""
+        """Move the stored proposals to the present: ``F(p, k U)`` (u already scaled by k).
+        A zero control means the next image is the same view again (no new evidence for the
+        drift test)."""
+        self._moved = bool(np.any(np.asarray(u) != 0.0))
         if len(self._proposals):
             self._proposals = predict_particles(motion_model, self._proposals, u)
             self._ages = [a + 1 for a in self._ages]
@@ -231,6 +245,11 @@ class DivergenceMonitor:
             self._disagree.append(disagrees)
             self._proposals = np.vstack([self._proposals, psi[None]])
             self._ages.append(0)
+            self._views.append(self._moved)
+        self._moved = False
+        if self.drift_only:
+            drift = self._drift(x, P)
+            return Verdict(False, doubtful=drift is not None, drift=drift)
         strong = (len(self._strong) == self.strong_steps
                   and float(np.median(self._strong)) > self.strong_nis)
         disagree = (len(self._disagree) >= self.window // 2
@@ -267,7 +286,7 @@ class DivergenceMonitor:
         away from the belief, or None."""
         k = self.drift_steps
         if self.drift_distance is None or self._drift_wait or self._ages[-k:] != list(
-                range(k - 1, -1, -1)):
+                range(k - 1, -1, -1)) or not all(list(self._views)[-(k - 1):]):
             return None
         recent = self._proposals[-k:]
         if not all(self._disagrees(p, x, P, self.drift_distance, self.drift_heading)

@@ -4,8 +4,8 @@ A particle cloud is the right tool to find the pose (a kidnap, a global start, t
 places) but a poor one to report it while tracking: the Augmented-MCL injections that make
 recovery fast also drop particles on the places an aliased image suggests, and a run of
 aliased frames now and then pulls the heaviest mode over for a few steps. The EKF
-(:class:`~localization.filtering.belief.BeliefFilter`, no divergence monitor, no restart of
-its own) tracks to a few centimetres with a consistent covariance but cannot tell it is lost.
+(:class:`~localization.filtering.belief.BeliefFilter`, no restart of its own; of the
+divergence monitor only its drift test, ``drift``) tracks to a few centimetres with a consistent covariance but cannot tell it is lost.
 The tracker runs both on the same images and controls and lets the particles say which
 hypothesis the EKF follows. With the names of the code, after each particle step::
 
@@ -86,6 +86,11 @@ class ModeTracker:
         broad mode can settle on the wrong place along a street that looks alike.
     alpha : array_like (3,), optional
         The EKF's body-frame inflation; default the localizer's calibrated consistency.
+    drift : bool
+        Give the EKF the divergence monitor's drift test alone
+        (``DivergenceMonitor(drift_only=True)``): psi* agreeing a little off it widens P
+        towards them (a shove), with no restart or "lost" of its own. Not with a localizer
+        of several districts (whose EKF takes no monitor).
 
     Attributes
     ----------
@@ -102,7 +107,7 @@ class ModeTracker:
                  confident_weight: float = 0.8, strong_nis: float = 100.0,
                  strong_steps: int = 8, max_gated: int = 30, max_unsupported: int = 20,
                  probation: int = 20,
-                 alpha: ArrayLike | None = None) -> None:
+                 alpha: ArrayLike | None = None, drift: bool = True) -> None:
         for name, v in (("support_weight", support_weight),
                         ("confident_weight", confident_weight)):
             check_real(v, name, low=0.0, high=1.0, low_open=True)
@@ -114,8 +119,12 @@ class ModeTracker:
         self.max_unsupported = check_int(max_unsupported, "max_unsupported", low=1)
         self.probation = check_int(probation, "probation", low=1)
         self.strong_nis = float(strong_nis)
+        if not isinstance(drift, (bool, np.bool_)):
+            raise TypeError(f"drift must be a bool, got {drift!r}")
+        drift = bool(drift) and not callable(getattr(localizer, "local", None))
         self.ekf = BeliefFilter(localizer, motion_model, measurement, relocalize_after=None,
-                                alpha=alpha, detect_divergence=False)
+                                alpha=alpha, detect_divergence={"drift_only": True} if drift
+                                else False)
         self.support_weight, self.confident_weight = float(support_weight), float(confident_weight)
         self.radius, self.heading_scale = float(radius), float(heading_scale)
         self.source, self.support, self.restarts = "ekf", 1.0, 0

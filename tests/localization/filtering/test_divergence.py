@@ -21,12 +21,13 @@ class Still:
         return X
 
 
-def feed(monitor, steps, nis, psi, rejected):
-    """``steps`` steps as BeliefFilter runs them: the stored proposals move (and age), then
-    the step is observed."""
+def feed(monitor, steps, nis, psi, rejected, u=(0.5, 0.0)):
+    """``steps`` steps as BeliefFilter runs them: the stored proposals move (and age; the
+    ``Still`` model leaves them where they are whatever the control ``u``), then the step is
+    observed."""
     verdicts = []
     for _ in range(steps):
-        monitor.move_proposals(Still(), np.zeros(2))
+        monitor.move_proposals(Still(), np.asarray(u, dtype=np.float64))
         verdicts.append(monitor.observe(nis, 3, psi, X, P, rejected))
     return verdicts
 
@@ -102,6 +103,21 @@ def test_no_drift_without_agreement_a_little_off(psis):
     assert all(v.drift is None for v in verdicts)
 
 
+def test_one_view_seen_again_at_rest_is_no_drift():
+    """Zero controls: the same image again and again, its psi* one error, however often."""
+    m = DivergenceMonitor(drift_steps=4)
+    assert all(v.drift is None for v in feed(m, 12, 4.0, SIDEWAYS, False, u=(0.0, 0.0)))
+    moving = feed(m, 4, 4.0, SIDEWAYS, False)  # moving again: the last view and 3 new ones
+    assert [v.drift is not None for v in moving] == [False, False, True, False]
+
+
+def test_drift_only_never_says_lost_or_restarts():
+    m = DivergenceMonitor(drift_only=True)
+    verdicts = feed(m, 12, 3000.0, FAR, True) + feed(m, 8, 4.0, SIDEWAYS, False)
+    assert not any(v.lost or v.restart is not None for v in verdicts)
+    assert any(v.drift is not None for v in verdicts)
+
+
 def test_drift_test_can_be_switched_off():
     m = DivergenceMonitor(drift_distance=None)
     assert all(v.drift is None for v in feed(m, 12, 4.0, SIDEWAYS, False))
@@ -115,7 +131,7 @@ def test_drift_steps_beyond_the_window_are_refused():
 @pytest.mark.parametrize("name, value", [("strong_nis", 0.0), ("strong_steps", 0),
                                          ("sustained_steps", 0), ("doubt_nis", np.nan),
                                          ("drift_distance", 0.0), ("drift_heading", -1.0),
-                                         ("drift_steps", 1)])
+                                         ("drift_steps", 1), ("drift_only", "yes")])
 def test_bad_settings_are_named(name, value):
     with pytest.raises((ValueError, TypeError), match=name):
         DivergenceMonitor(**{name: value})

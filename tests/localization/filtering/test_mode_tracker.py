@@ -137,3 +137,16 @@ def test_same_seed_same_run(localizer, features):
 def test_bad_settings_raise_clear_errors(localizer, track_mode, error, match):
     with pytest.raises(error, match=match):
         _belief(localizer, track_mode=track_mode)
+
+
+def test_the_tracker_ekf_has_the_drift_test_alone(localizer):
+    """By default the tracker's EKF runs the divergence monitor's drift test only (no restart
+    or "lost" of its own: the particles decide those); ``drift=False`` runs none; anything
+    else than a bool is named."""
+    from localization.filtering.mode_tracker import ModeTracker
+
+    model = UnicycleModel(DT)
+    assert ModeTracker(localizer, model).ekf.monitor.drift_only
+    assert ModeTracker(localizer, model, drift=False).ekf.monitor is None
+    with pytest.raises(TypeError, match="drift"):
+        ModeTracker(localizer, model, drift="yes")
