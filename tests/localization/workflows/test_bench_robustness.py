@@ -190,7 +190,7 @@ def test_detect_divergence_applies_to_the_ekf_rows_and_keys_their_records() -> N
         task_path,
     )
 
-    plain, detect = RobustnessConfig(), RobustnessConfig(detect_divergence=True)
+    plain, detect = RobustnessConfig(detect_divergence=False), RobustnessConfig()
     assert belief_options(plain, "ekf") == {"filter": "ekf"}
     assert belief_options(detect, "ekf") == {"filter": "ekf",
                                              "filter_options": {"detect_divergence": True}}
