@@ -187,15 +187,20 @@ def make_env(args: RobustnessConfig, city: int, condition: str, source: str) -> 
                          kidnap_at=(args.kidnap_at,) if condition in KIDNAPS else (),
                          kidnap_push=PUSH_DISTANCE if condition == "push" else None,
                          conditions=None if condition in SPECIAL else condition,
-                         **belief_options(args, source))
+                         **belief_options(args, source, condition))
 
 
-def belief_options(args: RobustnessConfig, source: str) -> dict[str, Any]:
-    """The BeliefWrapper settings of a row's pose source (none for the image-free ones)."""
+def belief_options(args: RobustnessConfig, source: str, condition: str = "nominal"
+                   ) -> dict[str, Any]:
+    """The BeliefWrapper settings of a row's pose source under ``condition`` (none for the
+    image-free ones). ``detect_divergence`` applies to the EKF rows on a localizer of one
+    map: the randomised localizer of experiences has several, which the monitor refuses."""
     if source not in FILTERS:
         return {}
     options: dict[str, Any] = {"filter": FILTERS[source]}
-    if source == "ekf" and args.detect_divergence:
+    one_map = (training_of(condition, args.moving_localizer) == "daylight"
+               or args.randomised_map != "experiences")
+    if source == "ekf" and args.detect_divergence and one_map:
         options["filter_options"] = {"detect_divergence": True}
     return options
 
@@ -232,7 +237,7 @@ def task_path(task: RobustTask) -> Path:
     """Where a task's episode records go (``<out>/robustness/episodes/``)."""
     name = (f"{task.agent}_{task.source}_{task.condition}_{task.city}_{task.seeds[0]}-"
             f"{task.seeds[-1]}_{task.config.image_size}px_{task.config.max_steps}"
-            f"{'_detect' if 'filter_options' in belief_options(task.config, task.source) else ''}"
+            f"{'_detect' if 'filter_options' in belief_options(task.config, task.source, task.condition) else ''}"
             f"{_on_daylight(task)}.json")
     return Path(task.config.out_dir) / "robustness" / "episodes" / name
 

@@ -93,7 +93,8 @@ class RobustnessConfig:
                 "since stop 50, chosen on tuning cities 13-14 (scripted agent, the "
                 "free-surface daylight localizer, 200 episodes per row: fewer contact "
                 "steps kidnapped and pushed, nominal success 1.00 both; docs/benchmarks.md "
-                "section 11); the preset and traffic rows were not measured with it"})
+                "section 11); rows on the randomised localizer of experiences (several "
+                "maps, which the monitor refuses) keep the plain EKF"})
     workers: int = field(default=1, metadata={"help": WORKERS_HELP})
     ray_address: str = field(default="", metadata={"help": RAY_ADDRESS_HELP})
     reuse_localizers: bool = field(default=False, metadata={

@@ -195,6 +195,10 @@ def test_detect_divergence_applies_to_the_ekf_rows_and_keys_their_records() -> N
     assert belief_options(detect, "ekf") == {"filter": "ekf",
                                              "filter_options": {"detect_divergence": True}}
     assert belief_options(detect, "particles") == {"filter": "particles"}
+    # the randomised localizer of experiences has several maps: no monitor there
+    assert belief_options(detect, "ekf", "traffic") == belief_options(detect, "ekf", "night") \
+        == {"filter": "ekf"}
+    assert belief_options(detect, "ekf", "push") == belief_options(detect, "ekf")
     assert belief_options(detect, "oracle") == {}
     names = {task_path(RobustTask(config, 21, "nominal", source, "scripted", (1, 2))).name
              for config in (plain, detect) for source in ("ekf", "particles")}
