@@ -5,7 +5,8 @@ places) but a poor one to report it while tracking: the Augmented-MCL injections
 recovery fast also drop particles on the places an aliased image suggests, and a run of
 aliased frames now and then pulls the heaviest mode over for a few steps. The EKF
 (:class:`~localization.filtering.belief.BeliefFilter`, no restart of its own; of the
-divergence monitor only its drift test, ``drift``) tracks to a few centimetres with a consistent covariance but cannot tell it is lost.
+divergence monitor only its drift test, ``drift``) tracks to a few centimetres with a
+consistent covariance but cannot tell it is lost.
 The tracker runs both on the same images and controls and lets the particles say which
 hypothesis the EKF follows. With the names of the code, after each particle step::
 

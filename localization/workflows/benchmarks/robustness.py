@@ -235,9 +235,10 @@ def run_robust_task(task: RobustTask) -> list[Episode]:
 
 def task_path(task: RobustTask) -> Path:
     """Where a task's episode records go (``<out>/robustness/episodes/``)."""
+    options = belief_options(task.config, task.source, task.condition)
     name = (f"{task.agent}_{task.source}_{task.condition}_{task.city}_{task.seeds[0]}-"
             f"{task.seeds[-1]}_{task.config.image_size}px_{task.config.max_steps}"
-            f"{'_detect' if 'filter_options' in belief_options(task.config, task.source, task.condition) else ''}"
+            f"{'_detect' if 'filter_options' in options else ''}"
             f"{_on_daylight(task)}.json")
     return Path(task.config.out_dir) / "robustness" / "episodes" / name
 

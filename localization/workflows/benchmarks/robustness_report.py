@@ -168,7 +168,7 @@ def markdown(result: dict[str, Any]) -> str:
             f"({a['randomised_features']}, {a['n_train_randomised']} "
             f"{_map_images(a.get('randomised_map', 'random'))}) for the presets"
             f"{_MOVING_ON[a.get('moving_localizer', 'randomised')]}; "
-            f"{'EKF with divergence detection (on one-map localizers); ' if a.get('detect_divergence') else ''}"
+            f"{'EKF with divergence detection; ' if a.get('detect_divergence') else ''}"
             f"{result['seconds']:.0f} s ({result['fit_seconds']:.0f} s of fitting, summed "
             "over the workers).\n\n"
             "\"as nominal\": the source never sees an image, so its episodes under a lighting "
