@@ -79,7 +79,7 @@ from typing import Any
 import numpy as np
 
 from localization._validation import check_int, check_real
-from localization.filtering._modes import find_modes
+from localization.filtering._modes import circular_mean, find_modes
 from localization.filtering.ekf import chi2_band
 from localization.filtering.particle_motion import predict_particles
 from localization.geometry import Array, wrap_angle
@@ -269,17 +269,19 @@ class DivergenceMonitor:
         drift = self._drift(x, P)
         return Verdict(lost, doubtful=doubtful or drift is not None, drift=drift)
 
-    def _disagrees(self, psi: Array, x: Array, P: Array, distance: float | None = None,
-                   heading: float | None = None) -> bool:
-        """psi* farther from the belief than ``distance`` (default ``disagree_distance``) m
-        plus 3 sigma, or off in heading by ``heading`` (``disagree_heading``) plus 3 sigma."""
-        distance = self.disagree_distance if distance is None else distance
-        heading = self.disagree_heading if heading is None else heading
+    @staticmethod
+    def _beyond_3_sigma(psis: Array, x: Array, P: Array) -> tuple[Array, Array]:
+        """Distances (n,) in metres and heading offsets (n,) in radians of psi* values
+        (n, 3) from the belief mean ``x``, each less 3 standard deviations of P (the largest
+        of its position block; its heading)."""
         sigma_xy = float(np.sqrt(max(np.linalg.eigvalsh(P[:2, :2])[-1], 0.0)))
-        far = np.hypot(*(psi[:2] - x[:2])) > distance + 3.0 * sigma_xy
-        turned = abs(float(wrap_angle(psi[2] - x[2]))) > \
-            heading + 3.0 * float(np.sqrt(max(P[2, 2], 0.0)))
-        return bool(far or turned)
+        far = np.hypot(psis[:, 0] - x[0], psis[:, 1] - x[1]) - 3.0 * sigma_xy
+        turned = np.abs(wrap_angle(psis[:, 2] - x[2])) - 3.0 * float(np.sqrt(max(P[2, 2], 0.0)))
+        return far, turned
+
+    def _disagrees(self, psi: Array, x: Array, P: Array) -> bool:
+        far, turned = self._beyond_3_sigma(psi[None], x, P)
+        return bool(far[0] > self.disagree_distance or turned[0] > self.disagree_heading)
 
     def _drift(self, x: Array, P: Array) -> Array | None:
         """The drift test (module docstring): the pose the last ``drift_steps`` psi* agree on
@@ -289,10 +291,12 @@ class DivergenceMonitor:
                 range(k - 1, -1, -1)) or not all(list(self._views)[-(k - 1):]):
             return None
         recent = self._proposals[-k:]
-        if not all(self._disagrees(p, x, P, self.drift_distance, self.drift_heading)
-                   and not self._disagrees(p, x, P) for p in recent):
+        far, turned = self._beyond_3_sigma(recent, x, P)
+        off = (far > self.drift_distance) | (turned > self.drift_heading)
+        disagree = (far > self.disagree_distance) | (turned > self.disagree_heading)
+        if not np.all(off & ~disagree):
             return None
-        yaw = float(np.arctan2(np.sin(recent[:, 2]).mean(), np.cos(recent[:, 2]).mean()))
+        yaw = circular_mean(recent[:, 2])
         mean = np.array([*recent[:, :2].mean(axis=0), yaw])
         if (np.hypot(*(recent[:, :2] - mean[:2]).T).max() > self.drift_distance
                 or np.abs(wrap_angle(recent[:, 2] - yaw)).max() > self.drift_heading):
