@@ -92,9 +92,11 @@ def map_conditions(map_looks: str, city: int) -> list[Any]:
     return list(experience_looks(city)) if map_looks == "experiences" else [map_looks]
 
 
-def fit_looks(make: Any, city: int, map_looks: str, looks: str, **fit: Any) -> Any:
+def fit_looks(make: Any, city: int, map_looks: str, looks: str,
+              calibrate_on_belief: bool = False, **fit: Any) -> Any:
     """:func:`fit_city_localizer` of ``city`` with its map in ``map_looks``
-    (:func:`map_conditions`) and its noise and calibration drives in ``looks``; ``make(c)``
+    (:func:`map_conditions`) and its noise and calibration drives in ``looks`` (the
+    consistency refined on a drive on the belief if ``calibrate_on_belief``); ``make(c)``
     makes the city's env in conditions c; the envs are closed after."""
     maps = [make(c) for c in map_conditions(map_looks, city)]
     noise_env = maps[0] if map_looks == looks else make(looks)
@@ -103,7 +105,7 @@ def fit_looks(make: Any, city: int, map_looks: str, looks: str, **fit: Any) -> A
             warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
             warnings.filterwarnings("ignore", message=".*quality.*")
             loc, _ = fit_city_localizer(maps[0], noise_env=noise_env, experience_envs=maps[1:],
-                                        calibrate_on_belief=False,
+                                        calibrate_on_belief=calibrate_on_belief,
                                         measurements=("representation",), quality_steps=0,
                                         **fit)
     finally:
@@ -155,6 +157,9 @@ class AppearanceBenchConfig:
                 "'patches' (8 x 8 patches, floor 0.001) chosen over 'channels' on tuning "
                 "cities 11-12 (daylight map, both with 128 components, percent within the three thresholds, at dusk 72 / 94 / 99 against 47 / 65 / 72, at "
                 "night 64 / 86 / 96 against 0 / 0 / 0)"})
+    calibrate_on_belief: bool = field(default=False, metadata={
+        "help": "refine each localizer's consistency on a drive on its own belief (in the "
+                "training's look) after the true-pose drive"})
     n_test: int = field(default=300, metadata={"help": "single test images per city and condition"})
     n_drives: int = field(default=2, metadata={"help": "closed-loop drives per city and condition"})
     drive_steps: int = field(default=300, metadata={"help": "steps of each closed-loop drive"})
@@ -249,8 +254,8 @@ def fit(args: AppearanceBenchConfig, city: int, training: str) -> Any:
     in ``args.randomised_map``)."""
     map_looks, looks = training_looks(training, args.randomised_map)
     return fit_looks(lambda c: make_env(args, city, c), city, map_looks, looks,
-                     n_train=args.n_train, lanes=args.lanes, n_drive=args.n_drive,
-                     seed=args.seed, localizer_params=localizer_params(args))
+                     args.calibrate_on_belief, n_train=args.n_train, lanes=args.lanes,
+                     n_drive=args.n_drive, seed=args.seed, localizer_params=localizer_params(args))
 
 
 def single_image_scores(loc: Any, images: np.ndarray, poses: np.ndarray) -> dict[str, Any]:
