@@ -52,6 +52,29 @@ def test_only_the_randomised_map_follows_randomised_map():
     assert training_looks("randomised", "experiences") == ("experiences", "random")
 
 
+@pytest.mark.parametrize("flag", [False, True])
+def test_calibrate_on_belief_reaches_the_fit(monkeypatch, flag):
+    """--appearance-calibrate-on-belief is what fit_city_localizer gets (default off)."""
+    from localization.workflows.benchmarks import appearance
+
+    seen = {}
+
+    class Env:
+        def close(self):
+            pass
+
+    def fake_fit(env, **kwargs):
+        seen.update(kwargs)
+        return "loc", {}
+
+    monkeypatch.setattr(appearance, "fit_city_localizer", fake_fit)
+    assert AppearanceBenchConfig().calibrate_on_belief is False
+    args = AppearanceBenchConfig(calibrate_on_belief=flag)
+    monkeypatch.setattr(appearance, "make_env", lambda args, city, c: Env())
+    assert appearance.fit(args, 11, "daylight") == "loc"
+    assert seen["calibrate_on_belief"] is flag
+
+
 def test_experience_maps_are_daylight_and_a_draw_of_each_other_family():
     from localization.workflows.benchmarks.appearance import map_conditions
 
