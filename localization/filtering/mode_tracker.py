@@ -5,7 +5,7 @@ places) but a poor one to report it while tracking: the Augmented-MCL injections
 recovery fast also drop particles on the places an aliased image suggests, and a run of
 aliased frames now and then pulls the heaviest mode over for a few steps. The EKF
 (:class:`~localization.filtering.belief.BeliefFilter`, no restart of its own; of the
-divergence monitor only its drift test, ``drift``) tracks to a few centimetres with a
+divergence monitor at most its drift test, ``drift``) tracks to a few centimetres with a
 consistent covariance but cannot tell it is lost.
 The tracker runs both on the same images and controls and lets the particles say which
 hypothesis the EKF follows. With the names of the code, after each particle step::
@@ -45,6 +45,7 @@ from numpy.typing import ArrayLike
 from localization._validation import check_int, check_real
 from localization.filtering._modes import Mode
 from localization.filtering.belief import BeliefFilter
+from localization.filtering.divergence import DRIFT_DISTANCE
 from localization.filtering.map_contact import Contact
 from localization.geometry import Array, wrap_angle
 
@@ -89,9 +90,11 @@ class ModeTracker:
         The EKF's body-frame inflation; default the localizer's calibrated consistency.
     drift : bool
         Give the EKF the divergence monitor's drift test alone
-        (``DivergenceMonitor(drift_only=True)``): psi* agreeing a little off it widens P
-        towards them (a shove), with no restart or "lost" of its own. Not with a localizer
-        of several districts (whose EKF takes no monitor).
+        (``DivergenceMonitor(drift_only=True, drift_distance=DRIFT_DISTANCE)``): psi*
+        agreeing a little off it widens P towards them (a shove), with no restart or "lost"
+        of its own. Off by default, as the EKF's (``localization.filtering.divergence``:
+        on the global benchmark's tuning cities it pulled right beliefs onto biased psi*).
+        Not with a localizer of several districts (whose EKF takes no monitor).
 
     Attributes
     ----------
@@ -108,7 +111,7 @@ class ModeTracker:
                  confident_weight: float = 0.8, strong_nis: float = 100.0,
                  strong_steps: int = 8, max_gated: int = 30, max_unsupported: int = 20,
                  probation: int = 20,
-                 alpha: ArrayLike | None = None, drift: bool = True) -> None:
+                 alpha: ArrayLike | None = None, drift: bool = False) -> None:
         for name, v in (("support_weight", support_weight),
                         ("confident_weight", confident_weight)):
             check_real(v, name, low=0.0, high=1.0, low_open=True)
@@ -124,8 +127,9 @@ class ModeTracker:
             raise TypeError(f"drift must be a bool, got {drift!r}")
         drift = bool(drift) and not callable(getattr(localizer, "local", None))
         self.ekf = BeliefFilter(localizer, motion_model, measurement, relocalize_after=None,
-                                alpha=alpha, detect_divergence={"drift_only": True} if drift
-                                else False)
+                                alpha=alpha, detect_divergence={
+                                    "drift_only": True, "drift_distance": DRIFT_DISTANCE}
+                                if drift else False)
         self.support_weight, self.confident_weight = float(support_weight), float(confident_weight)
         self.radius, self.heading_scale = float(radius), float(heading_scale)
         self.source, self.support, self.restarts = "ekf", 1.0, 0

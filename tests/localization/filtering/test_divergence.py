@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from localization.filtering.divergence import DivergenceMonitor
+from localization.filtering.divergence import DRIFT_DISTANCE, DivergenceMonitor
 
 X = np.zeros(3)
 P = np.diag([0.01, 0.01, 0.001])
@@ -82,7 +82,7 @@ def test_psi_agreeing_a_little_off_the_belief_is_a_drift():
     """Accepted images (NIS 4) whose psi* agree 1.2 m beside the belief: after drift_steps
     of them the verdict names that place, doubtful but not lost; then it needs fresh
     evidence before it fires again."""
-    m = DivergenceMonitor(drift_steps=4)
+    m = DivergenceMonitor(drift_distance=DRIFT_DISTANCE, drift_steps=4)
     feed(m, 8, 1.5, NEAR, False)
     verdicts = feed(m, 8, 4.0, SIDEWAYS, False)
     fired = [i for i, v in enumerate(verdicts) if v.drift is not None]
@@ -98,29 +98,36 @@ def test_psi_agreeing_a_little_off_the_belief_is_a_drift():
     [SIDEWAYS, SIDEWAYS, SIDEWAYS, NEAR],  # one of the last four agrees with the belief
 ])
 def test_no_drift_without_agreement_a_little_off(psis):
-    m = DivergenceMonitor(drift_steps=4)
+    m = DivergenceMonitor(drift_distance=DRIFT_DISTANCE, drift_steps=4)
     verdicts = [feed(m, 1, 4.0, psis[t % len(psis)], False)[0] for t in range(16)]
     assert all(v.drift is None for v in verdicts)
 
 
 def test_one_view_seen_again_at_rest_is_no_drift():
     """Zero controls: the same image again and again, its psi* one error, however often."""
-    m = DivergenceMonitor(drift_steps=4)
+    m = DivergenceMonitor(drift_distance=DRIFT_DISTANCE, drift_steps=4)
     assert all(v.drift is None for v in feed(m, 12, 4.0, SIDEWAYS, False, u=(0.0, 0.0)))
     moving = feed(m, 4, 4.0, SIDEWAYS, False)  # moving again: the last view and 3 new ones
     assert [v.drift is not None for v in moving] == [False, False, True, False]
 
 
 def test_drift_only_never_says_lost_or_restarts():
-    m = DivergenceMonitor(drift_only=True)
+    m = DivergenceMonitor(drift_only=True, drift_distance=DRIFT_DISTANCE)
     verdicts = feed(m, 12, 3000.0, FAR, True) + feed(m, 8, 4.0, SIDEWAYS, False)
     assert not any(v.lost or v.restart is not None for v in verdicts)
     assert any(v.drift is not None for v in verdicts)
 
 
-def test_drift_test_can_be_switched_off():
-    m = DivergenceMonitor(drift_distance=None)
+@pytest.mark.parametrize("settings", [{}, {"drift_distance": None}])
+def test_drift_test_is_off_by_default_and_can_be_switched_off(settings):
+    m = DivergenceMonitor(**settings)
+    assert m.drift_distance is None
     assert all(v.drift is None for v in feed(m, 12, 4.0, SIDEWAYS, False))
+
+
+def test_drift_only_without_a_drift_distance_is_refused():
+    with pytest.raises(ValueError, match="drift_only=True needs a drift_distance"):
+        DivergenceMonitor(drift_only=True)
 
 
 def test_drift_steps_beyond_the_window_are_refused():
@@ -417,7 +424,7 @@ def test_a_belief_shoved_beside_the_truth_is_widened_back(localizer, drive, shif
     images, poses, controls = drive
     W = localizer.transform(images)
     errors = {}
-    for name, detect in (("drift", True), ("no drift", {"drift_distance": None})):
+    for name, detect in (("drift", {"drift_distance": DRIFT_DISTANCE}), ("no drift", True)):
         f = _tracking(localizer, W, drive, detect_divergence=detect)
         yaw = f.ekf.x[2]
         f.ekf.x = f.ekf.x + shift * np.array([-np.sin(yaw), np.cos(yaw), 0.0])

@@ -140,13 +140,16 @@ def test_bad_settings_raise_clear_errors(localizer, track_mode, error, match):
 
 
 def test_the_tracker_ekf_has_the_drift_test_alone(localizer):
-    """By default the tracker's EKF runs the divergence monitor's drift test only (no restart
-    or "lost" of its own: the particles decide those); ``drift=False`` runs none; anything
-    else than a bool is named."""
+    """``drift=True``: the tracker's EKF runs the divergence monitor's drift test only (no
+    restart or "lost" of its own: the particles decide those); by default, as the EKF's, it
+    runs none; anything else than a bool is named."""
+    from localization.filtering.divergence import DRIFT_DISTANCE
     from localization.filtering.mode_tracker import ModeTracker
 
     model = UnicycleModel(DT)
-    assert ModeTracker(localizer, model).ekf.monitor.drift_only
+    monitor = ModeTracker(localizer, model, drift=True).ekf.monitor
+    assert monitor.drift_only and monitor.drift_distance == DRIFT_DISTANCE
+    assert ModeTracker(localizer, model).ekf.monitor is None
     assert ModeTracker(localizer, model, drift=False).ekf.monitor is None
     with pytest.raises(TypeError, match="drift"):
         ModeTracker(localizer, model, drift="yes")
