@@ -19,7 +19,7 @@ alone never gets there), or for a while after a contact where the map (``free_sp
 room around it (:mod:`~localization.filtering.map_contact`). Divergence detection
 (``detect_divergence``, :mod:`~localization.filtering.divergence`; off by default) grades
 the images' evidence against the belief and restarts it where the window's images agree, or
-widens P towards them when they agree a little off it (its drift test: a shove).
+widens P towards them when they agree a little off it (its drift test, off by default: a shove).
 ``belief_status`` is one of ``BELIEF_STATUSES``; a start with ``mode="global"`` is
 "relocalizing" from the training poses' spread until the images agree.
 
