@@ -66,7 +66,7 @@ MODES = ("grid", "random", "route", "lanes", "coverage")
 #: the keyword arguments of :func:`envs.lanes.lane_poses` that ``collect_dataset`` passes on
 LANE_OPTIONS = ("lanes", "lateral", "heading", "turn_radius", "turn_weight")
 #: the keyword arguments of :func:`envs.coverage.coverage_poses` that it passes on
-COVERAGE_OPTIONS = ("region", "corner_weight", "corner_reach")
+COVERAGE_OPTIONS = ("region", "corner_weight", "corner_reach", "margin")
 POSE_MARGIN = ROBOT_RADIUS + 0.1  # m of clearance to buildings for teleported poses
 ROLL_STEPS = 3  # env steps driven into each "lanes" pose
 CRUISE_SPEED = 0.6  # m/s, PurePursuit's default speed
@@ -217,7 +217,9 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
     **lane_options : keyword arguments of :func:`envs.lanes.lane_poses` ("lanes" only):
         ``lanes`` ("streets" or "route"), ``lateral``, ``heading``, ``turn_radius``,
         ``turn_weight``; or of :func:`envs.coverage.coverage_poses` ("coverage" only):
-        ``region`` ("streets" or "free"), ``corner_weight``, ``corner_reach``. The poses
+        ``region`` ("streets" or "free"), ``corner_weight``, ``corner_reach``, ``margin``
+        (clearance to buildings, m: at least the robot's radius ``ROBOT_RADIUS``; default
+        ``POSE_MARGIN``). The poses
         returned are the true poses reached (within a few mm of the sampled ones).
 
     The env's state is changed (teleports, or a reset and a drive for "route"): reset it
@@ -239,6 +241,8 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
     check_bool(progress, "progress")
     if mode == "coverage":
         check_options(lane_options, "coverage option", COVERAGE_OPTIONS)
+        if "margin" in lane_options:
+            check_real(lane_options["margin"], "margin", low=ROBOT_RADIUS)
     else:
         check_options(lane_options, "lane option", LANE_OPTIONS)
     if lane_options and mode not in ("lanes", "coverage"):
@@ -271,7 +275,7 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
             bar.update()
     elif mode == "coverage":
         rng = np.random.default_rng(seed)
-        targets = coverage_poses(city, n, rng, margin=POSE_MARGIN, **lane_options)
+        targets = coverage_poses(city, n, rng, **{"margin": POSE_MARGIN, **lane_options})
         controls = np.column_stack([rng.uniform(0.0, CRUISE_SPEED, n),
                                     rng.uniform(-base.W_MAX, base.W_MAX, n)])
         base.reset(seed=stream)  # seeds the motion noise of the drive-in

@@ -126,6 +126,16 @@ def test_coverage_mode_options(env):
         collect_dataset(env, 5, "lanes", progress=False, region="free")
 
 
+def test_coverage_mode_margin_reaches_closer_to_buildings(env):
+    _, default = collect_dataset(env, 300, "coverage", seed=1, progress=False)
+    _, close = collect_dataset(env, 300, "coverage", seed=1, progress=False, margin=0.24)
+    assert np.all(env.city.free_mask(close[:, :2], 0.22))
+    assert not np.all(env.city.free_mask(close[:, :2], POSE_MARGIN - 0.02))  # nearer walls
+    assert np.all(env.city.free_mask(default[:, :2], POSE_MARGIN - 0.02))
+    with pytest.raises(ValueError, match="margin"):  # the robot would be inside a building
+        collect_dataset(env, 5, "coverage", progress=False, margin=0.1)
+
+
 def test_off_lane_waypoints_leave_the_lanes_and_turn_back(city):
     wp = off_lane_waypoints(city, 200.0, np.random.default_rng(0))
     assert np.all(street_mask(city, wp, 0.32))
