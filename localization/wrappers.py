@@ -56,7 +56,7 @@ LOCALIZE = ("image", "global")
 #: filter_options each filter takes (the rest of its settings are BeliefWrapper's arguments)
 FILTER_OPTIONS = {
     "ekf": ("detect_divergence", "alpha", "inflate_factor", "noise", "free_space",
-            "contact_motion"),
+            "contact_motion", "project_contacts"),
     "particles": ("n_particles", "min_particles", "kld_epsilon", "kld_confidence",
                   "resample_threshold", "resample", "alpha", "alpha_slow",
                   "alpha_fast", "injection_ratio", "max_injection", "ambiguous_injection",
@@ -177,7 +177,9 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         method §15.4), ``free_space`` (the map against which a contact with the city,
         ``info["collision_with"]``, can contradict the belief, at the side
         ``info["collision_bearing"]`` says it was touched: default
-        ``env.unwrapped.city.free_mask``; None: contacts are ignored); for "particles"
+        ``env.unwrapped.city.free_mask``; None: contacts are ignored), ``project_contacts``
+        (default True: a contradicting contact also moves the mean to the touched wall);
+        for "particles"
         ParticleBelief's (``n_particles``, ..., ``sample_free``: default poses along the
         map's streets, from ``env.unwrapped.city.street_graph()``; ``seed``: default from
         ``reset(seed=...)``; ``free_space`` as the EKF's: a contact weighs the particles).

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from localization._validation import check_choice, check_int, check_real
+from localization._validation import check_bool, check_choice, check_int, check_real
 from localization.filtering._belief_recovery import RecoveryMixin
 from localization.filtering.divergence import monitor_for
 from localization.filtering.ekf import (
@@ -55,6 +55,7 @@ from localization.filtering.map_contact import (
     check_bearing,
     check_free_space,
     contact_contradicts,
+    contact_projection,
     contact_kinds,
 )
 from localization.filtering.particle_start import DEFAULT_P0
@@ -112,6 +113,14 @@ class BeliefFilter(RecoveryMixin):
         How a contact step is predicted: "blocked" (no translation, the commanded step as
         one standard deviation: :func:`~localization.filtering.map_contact.blocked_motion`),
         or with the commanded control as any other step.
+    project_contacts : bool
+        With ``free_space``: a contradicting contact with a known bearing also moves the
+        belief's mean to the nearest pose (in P's metric) at which the map explains it
+        (:func:`~localization.filtering.map_contact.contact_projection`; P kept): the
+        belief of a robot pushed sideways, which coasts parallel to the wall the robot
+        touches, moves to that wall (tuning cities 13-14, pushed, 200 episodes: 0.08
+        contact steps per episode against 0.12, nominal and kidnapped unchanged at 0.00).
+        False: the contact only makes the belief "lost", as before.
 
     Attributes
     ----------
@@ -131,7 +140,7 @@ class BeliefFilter(RecoveryMixin):
                  inflate_factor: float = 2.0,
                  detect_divergence: bool | dict[str, Any] = False,
                  noise: str = "global", free_space: FreeSpace | None = None,
-                 contact_motion: str = "blocked") -> None:
+                 contact_motion: str = "blocked", project_contacts: bool = True) -> None:
         check_localizer(localizer)
         check_choice(noise, "noise", NOISE_MODELS)
         self.contact_motion = check_choice(contact_motion, "contact_motion", CONTACT_MOTIONS)
@@ -172,6 +181,7 @@ class BeliefFilter(RecoveryMixin):
         self._refused: ViewOdometer | None = None  # odometry since a stalled trial
         self._repeat_view = False  # this step's accepted image was a repeat of the trial's
         self.free_space = check_free_space(free_space)
+        self.project_contacts = check_bool(project_contacts, "project_contacts")
         self._bumped = 0  # steps left "lost" after a contact that contradicts the belief
         self._since_contact = REPEAT_CONTACT_STEPS + 1  # steps since the last city contact
 
@@ -328,13 +338,22 @@ class BeliefFilter(RecoveryMixin):
         elif self.monitor is not None:
             status = self._watch(motion, w, nis, status)
         self._bumped = max(self._bumped - 1, 0)
-        if "city" in kinds and (self._repeated_contact() or (
-                self.free_space is not None and contact_contradicts(
-                    self.free_space, self.ekf.x, self.ekf.P, bearing))):
+        contradicts = "city" in kinds and self.free_space is not None and contact_contradicts(
+            self.free_space, self.ekf.x, self.ekf.P, bearing)
+        if contradicts and self.project_contacts and bearing is not None:
+            self._project(bearing)
+        if contradicts or ("city" in kinds and self._repeated_contact()):
             self._bumped = CONTACT_LOST_STEPS
         self._since_contact = 0 if "city" in kinds else self._since_contact + 1
         self._update_status(status)
         return nis, status
+
+    def _project(self, bearing: float) -> None:
+        """Move the mean to the nearest pose that explains a contact at ``bearing``."""
+        assert self.ekf is not None and self.free_space is not None
+        pose = contact_projection(self.free_space, self.ekf.x, self.ekf.P, bearing)
+        if pose is not None:
+            self.ekf.x = pose
 
     def _repeated_contact(self) -> bool:
         """A contact with the city this step is a second one within ``REPEAT_CONTACT_STEPS``

@@ -46,8 +46,9 @@ from localization.geometry import Array, wrap_angle
 
 __all__ = ["CONTACT_CLEARANCE", "CONTACT_GRID", "CONTACT_KINDS", "CONTACT_LOST_STEPS",
            "CONTACT_MISS", "CONTACT_MOTIONS", "CONTACT_SLACK", "CONTACT_WEIGHT",
-           "PUSH_SPEED", "PUSH_TURN_RATE", "REPEAT_CONTACT_STEPS", "ROBOT_RADIUS", "Contact",
+           "PROJECTION_REACH", "PROJECTION_STEP", "PUSH_SPEED", "PUSH_TURN_RATE", "REPEAT_CONTACT_STEPS", "ROBOT_RADIUS", "Contact",
            "FreeSpace", "blocked_motion", "check_bearing", "check_free_space", "contact_contradicts",
+           "contact_projection",
            "contact_kinds", "contact_log_likelihood", "contact_points", "touched_points",
            "weigh_contact"]
 
@@ -86,6 +87,10 @@ CONTACT_LOST_STEPS = 60
 #: 250 steps through views off the maps, bumped a building 20 times, 10 steps apart; its two
 #: standard deviations reached a wall, so no single contact contradicted it)
 REPEAT_CONTACT_STEPS = 20
+#: m, how far from the belief's mean :func:`contact_projection` looks for a position that
+#: explains a contact, and the spacing of its grid
+PROJECTION_REACH = 2.0
+PROJECTION_STEP = 0.05
 #: how :class:`~localization.filtering.belief.BeliefFilter` predicts a contact step
 CONTACT_MOTIONS = ("blocked", "commanded")
 #: what a contact can be with (``info["collision_with"]`` of ``AppearanceNav-v0``): the city
@@ -184,6 +189,40 @@ def contact_contradicts(free_space: FreeSpace, x: Array, P: Array,
                                  CONTACT_CLEARANCE + 2.0 * sigma)))
     points, spacing = contact_points(x, P, float(bearing))
     return bool(np.all(_free(free_space, points, CONTACT_SLACK + spacing)))
+
+
+def contact_projection(free_space: FreeSpace, x: Array, P: Array, bearing: float,
+                       reach: float = PROJECTION_REACH, step: float = PROJECTION_STEP
+                       ) -> Array | None:
+    """The pose nearest the belief ``x`` (3,), ``P`` (3, 3) at which the map explains a
+    contact touched at ``bearing`` (rad from the heading): the estimate projection of
+    constrained Kalman filtering (Simon & Chia 2002), the bumper's reading as a constraint.
+
+    Candidates are the belief's heading at positions ``x[:2] + d`` on a grid (``step`` m)
+    within ``reach`` m; a candidate explains the contact when a building lies within
+    ``CONTACT_SLACK`` of its touched point (:func:`touched_points`) while its centre is
+    free for ``ROBOT_RADIUS - CONTACT_SLACK`` (the robot touched, not inside a wall). Of
+    those, the one nearest in ``d^T P_xy^-1 d`` (Mahalanobis in position) is returned; None
+    when none lies within ``reach``. A belief shoved sideways off the robot's true path
+    thus moves to the wall it touched, instead of coasting parallel to it. (The particle
+    belief instead moves a share of its particles along the touched direction,
+    :mod:`~localization.filtering.contact_spread`: many poses, the images choose.)
+
+    Returns
+    -------
+    pose : ndarray (3,) or None
+    """
+    t = np.arange(-reach, reach + 0.5 * step, step)
+    d = np.stack(np.meshgrid(t, t), -1).reshape(-1, 2)
+    d = d[np.einsum("ij,ij->i", d, d) <= reach * reach]
+    X = np.column_stack([x[0] + d[:, 0], x[1] + d[:, 1], np.full(len(d), x[2])])
+    ok = (~_free(free_space, touched_points(X, bearing), CONTACT_SLACK)
+          & _free(free_space, X[:, :2], ROBOT_RADIUS - CONTACT_SLACK))
+    if not ok.any():
+        return None
+    d = d[ok]
+    inverse = np.linalg.inv(P[:2, :2] + 1e-12 * np.eye(2))
+    return X[ok][int(np.argmin(np.einsum("ij,jk,ik->i", d, inverse, d)))]
 
 
 def contact_log_likelihood(free_space: FreeSpace, X: Array, bearing: float | None = None

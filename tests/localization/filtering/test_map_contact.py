@@ -19,6 +19,7 @@ from localization.filtering.map_contact import (
     contact_contradicts,
     contact_kinds,
     contact_points,
+    contact_projection,
     touched_points,
 )
 
@@ -397,3 +398,63 @@ def test_the_wrapper_reads_what_was_touched_or_falls_back_to_the_bumper() -> Non
     assert _contact({"collision": False, "collision_with": ()}) == ()
     assert _contact({"collision": True}) is True  # an env that does not say what
     assert _contact({}) is False
+
+
+@pytest.mark.parametrize("bearing", [0.0, 0.7, -np.pi / 2, 2.8])
+def test_the_projection_moves_the_belief_to_the_wall_it_was_touched_at(bearing: float) -> None:
+    """A wall 1 m from the belief in the touched direction: the nearest pose that explains
+    the contact has its touched point within CONTACT_SLACK of the wall, its centre free,
+    the heading kept, and lies towards the wall (about 1 - ROBOT_RADIUS m away)."""
+    wall = _wall(X, bearing, 1.0)
+    pose = contact_projection(wall, X, P_SMALL, bearing)
+    assert pose is not None and pose[2] == X[2]
+    assert not wall(touched_points(pose[None], bearing), CONTACT_SLACK)[0]
+    assert wall(pose[None, :2], ROBOT_RADIUS - CONTACT_SLACK)[0]
+    shift = pose[:2] - X[:2]
+    towards = np.array([np.cos(X[2] + bearing), np.sin(X[2] + bearing)])
+    assert shift @ towards == pytest.approx(1.0 - ROBOT_RADIUS, abs=0.1)
+    assert np.hypot(*shift) == pytest.approx(1.0 - ROBOT_RADIUS, abs=0.1)  # straight at it
+
+
+def test_the_projection_prefers_the_direction_the_belief_is_unsure_in() -> None:
+    """Mahalanobis, not Euclidean: a wall 0.8 m ahead, touched ahead; a belief unsure along
+    its heading and sure sideways moves straight along it (None when nothing explains the
+    contact within the reach)."""
+    ahead = HalfPlane(X[:2] + 0.8 * np.array([np.cos(X[2]), np.sin(X[2])]),
+                      np.array([np.cos(X[2]), np.sin(X[2])]))
+    body = np.array([[np.cos(X[2]), -np.sin(X[2])], [np.sin(X[2]), np.cos(X[2])]])
+    P = np.eye(3) * 0.01
+    P[:2, :2] = body @ np.diag([1.0, 0.01]) @ body.T  # sure sideways, unsure along
+    pose = contact_projection(ahead, X, P, 0.0)
+    along = (pose[:2] - X[:2]) @ body
+    assert along[0] == pytest.approx(0.8 - ROBOT_RADIUS, abs=0.1) and abs(along[1]) < 0.06
+    assert contact_projection(Map(True), X, P_SMALL, 0.0) is None
+
+
+@pytest.mark.parametrize("project", [True, False])
+def test_the_filter_projects_a_contradicted_belief_onto_the_touched_wall(localizer, drive,
+                                                                        project: bool):
+    """``project_contacts``: a bump ahead with the wall 1 m ahead of the belief moves the
+    mean to the wall (and the belief is "lost" either way); off, the mean stays."""
+    holder = {}
+    f, W, controls = _tracking(localizer, drive, lambda p, m: holder["wall"](p, m),
+                               project_contacts=project)
+    x = f.x
+    holder["wall"] = _wall(x, 0.0, 1.0)
+    f.step(controls[59], W[60], contact=("city",), bearing=0.0)
+    ahead = (f.x[:2] - x[:2]) @ np.array([np.cos(x[2]), np.sin(x[2])])
+    assert f.belief_status == "lost"
+    if project:
+        assert ahead == pytest.approx(1.0 - ROBOT_RADIUS, abs=0.15)
+    else:
+        assert abs(ahead) < 0.15
+
+
+def test_project_contacts_must_be_a_bool(localizer) -> None:
+    from localization.filtering.belief import BeliefFilter
+    from tests.localization.conftest import make_env
+
+    env = make_env()
+    with pytest.raises(TypeError, match="project_contacts"):
+        BeliefFilter(localizer, env.unwrapped.motion_model, project_contacts="yes")
+    env.close()
