@@ -55,8 +55,8 @@ from localization.filtering.map_contact import (
     check_bearing,
     check_free_space,
     contact_contradicts,
-    contact_projection,
     contact_kinds,
+    contact_projection,
 )
 from localization.filtering.particle_start import DEFAULT_P0
 from localization.filtering.recorded_run import run_recorded

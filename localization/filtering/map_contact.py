@@ -44,13 +44,34 @@ import numpy as np
 from localization.filtering.log_weights import log_sum_exp
 from localization.geometry import Array, wrap_angle
 
-__all__ = ["CONTACT_CLEARANCE", "CONTACT_GRID", "CONTACT_KINDS", "CONTACT_LOST_STEPS",
-           "CONTACT_MISS", "CONTACT_MOTIONS", "CONTACT_SLACK", "CONTACT_WEIGHT",
-           "PROJECTION_REACH", "PROJECTION_STEP", "PUSH_SPEED", "PUSH_TURN_RATE", "REPEAT_CONTACT_STEPS", "ROBOT_RADIUS", "Contact",
-           "FreeSpace", "blocked_motion", "check_bearing", "check_free_space", "contact_contradicts",
-           "contact_projection",
-           "contact_kinds", "contact_log_likelihood", "contact_points", "touched_points",
-           "weigh_contact"]
+__all__ = [
+    "CONTACT_CLEARANCE",
+    "CONTACT_GRID",
+    "CONTACT_KINDS",
+    "CONTACT_LOST_STEPS",
+    "CONTACT_MISS",
+    "CONTACT_MOTIONS",
+    "CONTACT_SLACK",
+    "CONTACT_WEIGHT",
+    "PROJECTION_REACH",
+    "PROJECTION_STEP",
+    "PUSH_SPEED",
+    "PUSH_TURN_RATE",
+    "REPEAT_CONTACT_STEPS",
+    "ROBOT_RADIUS",
+    "Contact",
+    "FreeSpace",
+    "blocked_motion",
+    "check_bearing",
+    "check_free_space",
+    "contact_contradicts",
+    "contact_kinds",
+    "contact_log_likelihood",
+    "contact_points",
+    "contact_projection",
+    "touched_points",
+    "weigh_contact",
+]
 
 #: ``free_space(points (n, 2), margin) -> (n,) bool``: whether a disc of radius ``margin`` (m)
 #: around each point is free of buildings (``City.free_mask``)
