@@ -46,7 +46,7 @@ from localization._validation import check_int, check_real
 from localization.filtering._modes import Mode
 from localization.filtering.belief import BeliefFilter
 from localization.filtering.divergence import DRIFT_DISTANCE
-from localization.filtering.map_contact import Contact
+from localization.filtering.map_contact import Contact, FreeSpace
 from localization.geometry import Array, wrap_angle
 
 __all__ = ["TRACKER_SOURCES", "ModeTracker", "make_tracker"]
@@ -95,6 +95,16 @@ class ModeTracker:
         of its own. Off by default, as the EKF's (``localization.filtering.divergence``:
         on the global benchmark's tuning cities it pulled right beliefs onto biased psi*).
         Not with a localizer of several districts (whose EKF takes no monitor).
+    free_space : callable, optional
+        The map (``city.free_mask``), given to the EKF with its contact projection
+        (:class:`~localization.filtering.belief.BeliefFilter`'s ``free_space`` and
+        ``project_contacts``): a contact with the city touched where the EKF's belief
+        has room moves its mean to the nearest pose that explains it, as the EKF alone
+        does. Without it a tracker EKF pushed 1 m sideways kept being reported, and
+        the robot kept bumping the wall, while the particles' mode already sat at it
+        (their contact spread never ran: the particles were not contradicted).
+    contact_motion : {"blocked", "commanded"}
+        How the EKF predicts a contact step (the particles' setting).
 
     Attributes
     ----------
@@ -111,7 +121,8 @@ class ModeTracker:
                  confident_weight: float = 0.8, strong_nis: float = 100.0,
                  strong_steps: int = 8, max_gated: int = 30, max_unsupported: int = 20,
                  probation: int = 20,
-                 alpha: ArrayLike | None = None, drift: bool = False) -> None:
+                 alpha: ArrayLike | None = None, drift: bool = False,
+                 free_space: FreeSpace | None = None, contact_motion: str = "blocked") -> None:
         for name, v in (("support_weight", support_weight),
                         ("confident_weight", confident_weight)):
             check_real(v, name, low=0.0, high=1.0, low_open=True)
@@ -129,7 +140,8 @@ class ModeTracker:
         self.ekf = BeliefFilter(localizer, motion_model, measurement, relocalize_after=None,
                                 alpha=alpha, detect_divergence={
                                     "drift_only": True, "drift_distance": DRIFT_DISTANCE}
-                                if drift else False)
+                                if drift else False, free_space=free_space,
+                                contact_motion=contact_motion)
         self.support_weight, self.confident_weight = float(support_weight), float(confident_weight)
         self.radius, self.heading_scale = float(radius), float(heading_scale)
         self.source, self.support, self.restarts = "ekf", 1.0, 0
@@ -170,16 +182,16 @@ class ModeTracker:
         return float(weights[d2 < self.radius ** 2].sum())
 
     def step(self, u: ArrayLike, w: ArrayLike, particles: Array, weights: Array,
-             dominant: Mode, contact: Contact = False) -> str:
+             dominant: Mode, contact: Contact = False, bearing: float | None = None) -> str:
         """Step the EKF with the control ``u`` (2,) and features ``w`` (m,) (``contact``: what
-        a contact step touched, predicted as blocked), then choose the report from the particles
-        (N, 3), their weights (N,) and dominant mode.
+        a contact step touched, ``bearing``: where, rad from the heading), then choose the
+        report from the particles (N, 3), their weights (N,) and dominant mode.
 
         Returns
         -------
         source : one of ``TRACKER_SOURCES``
         """
-        nis, _ = self.ekf.step(u, w, contact)
+        nis, _ = self.ekf.step(u, w, contact, bearing)
         if np.isfinite(nis):  # out of domain (NaN) neither adds nor breaks a run
             self.strong = self.strong + 1 if nis > self.strong_nis else 0
         self._mode = None

@@ -228,7 +228,9 @@ class ParticleBelief(ParticleContactMixin, ParticleStatusMixin, ParticleStateMix
         self.tracker = make_tracker(track_mode, localizer, motion_model, measurement,
                                     alpha=self.alpha, radius=self.mode_radius,
                                     heading_scale=self.heading_scale,
-                                    confident_weight=self.confident_weight)
+                                    confident_weight=self.confident_weight,
+                                    free_space=self.free_space,
+                                    contact_motion=self.contact_motion)
         self.particles: Array | None = None
         self.log_weights: Array | None = None
         self.modes: list[Mode] = []
@@ -342,9 +344,9 @@ class ParticleBelief(ParticleContactMixin, ParticleStatusMixin, ParticleStateMix
         self._check()
         w = self._check_w(w)
         self.predict(u, contact)
-        kinds = contact_kinds(contact)
-        log_B = self._bump(kinds, check_bearing(bearing))
-        contact = kinds if self.contact_motion == "blocked" else frozenset()
+        kinds, bearing = contact_kinds(contact), check_bearing(bearing)
+        log_B = self._bump(kinds, bearing)
+        contact = (kinds, bearing)
         self.injected = 0
         z = self.likelihood.measure(w)
         if not np.all(np.isfinite(z)):
@@ -381,12 +383,13 @@ class ParticleBelief(ParticleContactMixin, ParticleStatusMixin, ParticleStateMix
         """How many particles to inject at this share: Binomial(N, share)."""
         return int(self.rng.binomial(len(self.particles), share)) if share > 0 else 0
 
-    def _track(self, u: ArrayLike, w: Array, contact: frozenset[str]) -> None:
-        """Step the mode tracker (``contact``: what a blocked contact step touched); a
-        report most particles disagree with is "doubtful"."""
+    def _track(self, u: ArrayLike, w: Array, contact: tuple[frozenset[str], float | None]
+               ) -> None:
+        """Step the mode tracker (``contact``: what this step touched and where); a report
+        most particles disagree with is "doubtful"."""
         if self.tracker is None:
             return
-        source = self.tracker.step(u, w, self.particles, self.weights, self.modes[0], contact)
+        source = self.tracker.step(u, w, self.particles, self.weights, self.modes[0], *contact)
         unsupported = source == "ekf" and self.tracker.support < self.tracker.support_weight
         if unsupported and self.status == "tracking":
             self.status = "doubtful"
