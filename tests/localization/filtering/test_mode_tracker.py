@@ -153,3 +153,30 @@ def test_the_tracker_ekf_has_the_drift_test_alone(localizer):
     assert ModeTracker(localizer, model, drift=False).ekf.monitor is None
     with pytest.raises(TypeError, match="drift"):
         ModeTracker(localizer, model, drift="yes")
+
+
+@pytest.mark.parametrize("tracker_map", [True, False], ids=["tracker with the map", "without"])
+def test_a_contact_the_tracker_ekf_cannot_explain_moves_it_to_the_wall(localizer, features,
+                                                                     tracker_map: bool):
+    """A wall 1 m ahead of the reported EKF, touched ahead, the particles already at it (so
+    they are not contradicted and their contact spread does not run): the tracker's EKF,
+    with the particles' map, projects itself onto the wall; given no map it stays put
+    (what every pushed robot's report did before, bumping the same wall again and again)."""
+    from localization.filtering.map_contact import ROBOT_RADIUS
+    from tests.localization.filtering.test_map_contact import _wall
+
+    W, poses, _controls = features
+    x = poses[0]
+    wall = _wall(x, 0.0, 1.0)
+    pf = _belief(localizer, max_injection=0.0, free_space=wall,
+                 track_mode={} if tracker_map else {"free_space": None})
+    pf.reset(W[0], x0=x)
+    ahead = np.array([np.cos(x[2]), np.sin(x[2])])
+    pf._set(_cloud(x + np.r_[(1.0 - ROBOT_RADIUS) * ahead, 0.0], pf.n_particles))
+    pf.step(np.zeros(2), W[0], contact=("city",), bearing=0.0)
+    assert pf.status != "lost"  # the particles explain the contact
+    moved = (pf.pose_mean[:2] - x[:2]) @ ahead
+    if tracker_map:
+        assert moved == pytest.approx(1.0 - ROBOT_RADIUS, abs=0.15)
+    else:
+        assert abs(moved) < 0.15
