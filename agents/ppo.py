@@ -25,6 +25,7 @@ import torch
 from gymnasium import spaces
 from numpy.typing import NDArray
 from stable_baselines3 import PPO
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 
 from agents.observations import NavigationFeatures
@@ -48,10 +49,17 @@ ACTION_SPACE = spaces.Box(-1.0, 1.0, (2,), np.float32)
 
 
 def make_ppo(env: gym.Env | Any, seed: int = 0, **overrides: Any) -> PPO:
-    """A ``PPO("MultiInputPolicy", env)`` with :data:`PPO_DEFAULTS` (overridable), on the CPU."""
+    """A ``PPO("MultiInputPolicy", env)`` with :data:`PPO_DEFAULTS` (overridable), on the CPU.
+
+    Without a ``tensorboard_log`` it logs nowhere (``model.set_logger`` to log):
+    stable-baselines3's default logger makes an empty ``SB3-<time>`` folder in the temp
+    directory at every ``learn``."""
     check_seed(seed, "seed")
     kwargs = {**PPO_DEFAULTS, **overrides}
-    return PPO("MultiInputPolicy", env, seed=seed, device="cpu", verbose=0, **kwargs)
+    model = PPO("MultiInputPolicy", env, seed=seed, device="cpu", verbose=0, **kwargs)
+    if kwargs.get("tensorboard_log") is None:
+        model.set_logger(Logger(None, []))
+    return model
 
 
 def save_policy(model: PPO, path: str | Path, lookaheads: tuple[float, ...] = (0.5, 1.0, 2.0),

@@ -1,6 +1,7 @@
 """RL plumbing: the navigation observation wrapper, the training reward, PPO smoke test, save/load."""
 
 import json
+import tempfile
 import warnings
 
 import gymnasium as gym
@@ -55,12 +56,17 @@ def test_street_progress_reward_sums_to_the_street_distance_covered():
     env.close()
 
 
-def test_ppo_trains_saves_reloads_and_acts(tmp_path):
+def test_ppo_trains_saves_reloads_and_acts(tmp_path, monkeypatch):
     venv = DummyVecEnv([lambda: _nav_env(100)] * 2)
     venv.seed(0)
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)
     model = make_ppo(venv, seed=0, n_steps=256, batch_size=128, n_epochs=2)
     before = {k: v.clone() for k, v in model.policy.state_dict().items()}
     model.learn(2048)
+    assert not list(temp.glob("SB3-*"))  # no SB3-<time> folder left behind
     assert any(not np.allclose(before[k], v) for k, v in model.policy.state_dict().items())
     path = save_policy(model, tmp_path / "policy", pose_source="oracle")
     settings = json.loads((tmp_path / "policy.json").read_text())
