@@ -340,8 +340,7 @@ class BeliefFilter(RecoveryMixin):
         self._bumped = max(self._bumped - 1, 0)
         contradicts = "city" in kinds and self.free_space is not None and contact_contradicts(
             self.free_space, self.ekf.x, self.ekf.P, bearing)
-        if "city" in kinds and self.free_space is not None and self.project_contacts \
-                and bearing is not None:
+        if contradicts and self.project_contacts and bearing is not None:
             self._project(bearing)
         if contradicts or ("city" in kinds and self._repeated_contact()):
             self._bumped = CONTACT_LOST_STEPS
