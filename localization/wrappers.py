@@ -179,10 +179,10 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         ``info["collision_bearing"]`` says it was touched: default
         ``env.unwrapped.city.free_mask``; None: contacts are ignored), ``project_contacts``
         (default True: a contradicting contact also moves the mean to the touched wall);
-        for "particles"
-        ParticleBelief's (``n_particles``, ..., ``sample_free``: default poses along the
-        map's streets, from ``env.unwrapped.city.street_graph()``; ``seed``: default from
-        ``reset(seed=...)``; ``free_space`` as the EKF's: a contact weighs the particles).
+        for "particles" ParticleBelief's (``n_particles``, ..., ``sample_free``: default
+        poses along the map's streets, from ``env.unwrapped.city.street_graph()``;
+        ``seed``: default from ``reset(seed=...)``; ``free_space`` as the EKF's: a contact
+        weighs the particles, and its mode tracker's EKF projects as the EKF does).
 
     Notes
     -----

@@ -161,7 +161,7 @@ def test_a_contact_the_tracker_ekf_cannot_explain_moves_it_to_the_wall(localizer
     """A wall 1 m ahead of the reported EKF, touched ahead, the particles already at it (so
     they are not contradicted and their contact spread does not run): the tracker's EKF,
     with the particles' map, projects itself onto the wall; given no map it stays put
-    (what every pushed robot's report did before, bumping the same wall again and again)."""
+    (what a pushed robot's report did before, bumping the same wall again and again)."""
     from localization.filtering.map_contact import ROBOT_RADIUS
     from tests.localization.filtering.test_map_contact import _wall
 
