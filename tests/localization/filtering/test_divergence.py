@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from localization.filtering.divergence import DRIFT_DISTANCE, DivergenceMonitor
+from localization.filtering.divergence import DRIFT_CHANGE, DRIFT_DISTANCE, DivergenceMonitor
 
 X = np.zeros(3)
 P = np.diag([0.01, 0.01, 0.001])
@@ -82,7 +82,7 @@ def test_psi_agreeing_a_little_off_the_belief_is_a_drift():
     """Accepted images (NIS 4) whose psi* agree 1.2 m beside the belief: after drift_steps
     of them the verdict names that place, doubtful but not lost; then it needs fresh
     evidence before it fires again."""
-    m = DivergenceMonitor(drift_distance=DRIFT_DISTANCE, drift_steps=4)
+    m = DivergenceMonitor(drift_distance=DRIFT_DISTANCE, drift_steps=4, drift_change=None)
     feed(m, 8, 1.5, NEAR, False)
     verdicts = feed(m, 8, 4.0, SIDEWAYS, False)
     fired = [i for i, v in enumerate(verdicts) if v.drift is not None]
@@ -105,40 +105,68 @@ def test_no_drift_without_agreement_a_little_off(psis):
 
 def test_one_view_seen_again_at_rest_is_no_drift():
     """Zero controls: the same image again and again, its psi* one error, however often."""
-    m = DivergenceMonitor(drift_distance=DRIFT_DISTANCE, drift_steps=4)
+    m = DivergenceMonitor(drift_distance=DRIFT_DISTANCE, drift_steps=4, drift_change=None)
     assert all(v.drift is None for v in feed(m, 12, 4.0, SIDEWAYS, False, u=(0.0, 0.0)))
     moving = feed(m, 4, 4.0, SIDEWAYS, False)  # moving again: the last view and 3 new ones
     assert [v.drift is not None for v in moving] == [False, False, True, False]
 
 
+def test_drift_change_fires_on_a_shove_once():
+    """psi* agreeing with the belief, then suddenly 1.2 m beside it: the change-only drift
+    test fires as the plain one does, and not again while the images keep saying so (the
+    run before the recent one is off already)."""
+    m = DivergenceMonitor(drift_distance=DRIFT_DISTANCE, drift_steps=4, drift_change=1.0)
+    feed(m, 8, 1.5, NEAR, False)
+    verdicts = feed(m, 12, 4.0, SIDEWAYS, False)
+    assert [i for i, v in enumerate(verdicts) if v.drift is not None] == [3]
+    np.testing.assert_allclose(verdicts[3].drift, SIDEWAYS, atol=1e-9)
+
+
+@pytest.mark.parametrize("change, fires", [(None, True), (DRIFT_CHANGE, False)])
+def test_drift_change_ignores_a_bias_that_grows_slowly(change, fires):
+    """psi* moving off the belief by 0.1 m a step (a biased stretch of map, not a shove):
+    the plain drift test fires once four values agree beyond its distance, the change-only
+    one never does (no run of four jumps by more than drift_distance from the one before)."""
+    m = DivergenceMonitor(drift_distance=DRIFT_DISTANCE, drift_steps=4, drift_change=change)
+    feed(m, 8, 1.5, NEAR, False)
+    verdicts = [feed(m, 1, 4.0, np.array([0.0, 0.1 * t, 0.0]), False)[0] for t in range(21)]
+    assert any(v.drift is not None for v in verdicts) == fires
+
+
 def test_drift_only_never_says_lost_or_restarts():
-    m = DivergenceMonitor(drift_only=True, drift_distance=DRIFT_DISTANCE)
+    m = DivergenceMonitor(drift_only=True, drift_distance=DRIFT_DISTANCE, drift_change=None)
     verdicts = feed(m, 12, 3000.0, FAR, True) + feed(m, 8, 4.0, SIDEWAYS, False)
     assert not any(v.lost or v.restart is not None for v in verdicts)
     assert any(v.drift is not None for v in verdicts)
 
 
-@pytest.mark.parametrize("settings", [{}, {"drift_distance": None}])
-def test_drift_test_is_off_by_default_and_can_be_switched_off(settings):
-    m = DivergenceMonitor(**settings)
-    assert m.drift_distance is None
+def test_drift_test_is_on_by_default_and_can_be_switched_off():
+    m = DivergenceMonitor()
+    assert (m.drift_distance, m.drift_change) == (DRIFT_DISTANCE, DRIFT_CHANGE)
+    feed(m, 8, 1.5, NEAR, False)
+    assert any(v.drift is not None for v in feed(m, 12, 4.0, SIDEWAYS, False))
+    m = DivergenceMonitor(drift_distance=None)
+    feed(m, 8, 1.5, NEAR, False)
     assert all(v.drift is None for v in feed(m, 12, 4.0, SIDEWAYS, False))
 
 
 def test_drift_only_without_a_drift_distance_is_refused():
     with pytest.raises(ValueError, match="drift_only=True needs a drift_distance"):
-        DivergenceMonitor(drift_only=True)
+        DivergenceMonitor(drift_only=True, drift_distance=None)
 
 
 def test_drift_steps_beyond_the_window_are_refused():
     with pytest.raises(ValueError, match="drift_steps"):
         DivergenceMonitor(window=4, drift_steps=6)
+    with pytest.raises(ValueError, match="drift_change needs 2 \\* drift_steps"):
+        DivergenceMonitor(window=8, drift_steps=5, drift_change=1.0)
 
 
 @pytest.mark.parametrize("name, value", [("strong_nis", 0.0), ("strong_steps", 0),
                                          ("sustained_steps", 0), ("doubt_nis", np.nan),
                                          ("drift_distance", 0.0), ("drift_heading", -1.0),
-                                         ("drift_steps", 1), ("drift_only", "yes")])
+                                         ("drift_steps", 1), ("drift_only", "yes"),
+                                         ("drift_change", 0.0)])
 def test_bad_settings_are_named(name, value):
     with pytest.raises((ValueError, TypeError), match=name):
         DivergenceMonitor(**{name: value})
@@ -415,16 +443,20 @@ def test_a_start_at_a_look_alike_starts_again_at_a_later_image(localizer, drive)
     assert beliefs[-1] == "tracking"
 
 
-@pytest.mark.parametrize("shift", [1.2, -1.0])
-def test_a_belief_shoved_beside_the_truth_is_widened_back(localizer, drive, shift):
+@pytest.mark.parametrize("shift, change", [(1.2, None), (-1.0, None), (1.2, DRIFT_CHANGE),
+                                           (-1.4, DRIFT_CHANGE)])
+def test_a_belief_shoved_beside_the_truth_is_widened_back(localizer, drive, shift, change):
     """The belief moved ``shift`` m sideways at START (what a push does to the robot, the
     other way round): the representation measurements still pass the gate and, with P 0.1 m
     wide, move it a centimetre a step (0.9 m off ten steps later, measured); the drift test
-    widens P towards psi* and the images bring it back (0.1 m, measured)."""
+    widens P towards psi* and the images bring it back (0.1 m, measured), also when it
+    fires on a sudden change of psi*'s offset only (``drift_change``, the default; the
+    shifts beyond it)."""
     images, poses, controls = drive
     W = localizer.transform(images)
     errors = {}
-    for name, detect in (("drift", {"drift_distance": DRIFT_DISTANCE}), ("no drift", True)):
+    for name, detect in (("drift", {"drift_distance": DRIFT_DISTANCE, "drift_change": change}),
+                         ("no drift", {"drift_distance": None})):
         f = _tracking(localizer, W, drive, detect_divergence=detect)
         yaw = f.ekf.x[2]
         f.ekf.x = f.ekf.x + shift * np.array([-np.sin(yaw), np.cos(yaw), 0.0])
