@@ -140,19 +140,20 @@ def test_drift_only_never_says_lost_or_restarts():
     assert any(v.drift is not None for v in verdicts)
 
 
-def test_drift_test_is_on_by_default_and_can_be_switched_off():
+def test_drift_test_is_off_by_default_and_switched_on_fires_on_a_change():
     m = DivergenceMonitor()
-    assert (m.drift_distance, m.drift_change) == (DRIFT_DISTANCE, DRIFT_CHANGE)
-    feed(m, 8, 1.5, NEAR, False)
-    assert any(v.drift is not None for v in feed(m, 12, 4.0, SIDEWAYS, False))
-    m = DivergenceMonitor(drift_distance=None)
+    assert m.drift_distance is None
     feed(m, 8, 1.5, NEAR, False)
     assert all(v.drift is None for v in feed(m, 12, 4.0, SIDEWAYS, False))
+    m = DivergenceMonitor(drift_distance=DRIFT_DISTANCE)
+    assert m.drift_change == DRIFT_CHANGE
+    feed(m, 8, 1.5, NEAR, False)
+    assert any(v.drift is not None for v in feed(m, 12, 4.0, SIDEWAYS, False))
 
 
 def test_drift_only_without_a_drift_distance_is_refused():
     with pytest.raises(ValueError, match="drift_only=True needs a drift_distance"):
-        DivergenceMonitor(drift_only=True, drift_distance=None)
+        DivergenceMonitor(drift_only=True)
 
 
 def test_drift_steps_beyond_the_window_are_refused():
