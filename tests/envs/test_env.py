@@ -173,8 +173,8 @@ def test_a_shove_by_a_vehicle_cannot_flip_the_robot():
     """Without the upright torque this shove (a waiting vehicle driving on into a robot that
     turns into it) flipped the robot on its back (envs.upright)."""
     from envs.robot import ROBOT_RADIUS
-    from envs.upright import TIPPED_OVER_TILT, UPRIGHT_TILT
     from envs.traffic import VEHICLE_HALF
+    from envs.upright import TIPPED_OVER_TILT, UPRIGHT_TILT
 
     e = gym.make("AppearanceNav-v0", image_size=(16, 16),
                  conditions={"preset": "traffic", "vehicles": 1, "pedestrians": 0})

@@ -256,7 +256,7 @@ def test_predict_refines_with_the_chosen_look(exp, test_set):
         loc, wk = view.localizer, view.select(w)[None]
         L = loc.feature_whitener()
 
-        def cost(pose):
+        def cost(pose, loc=loc, wk=wk, L=L):  # this image's view, bound now
             return float(np.sum(((wk - loc.regressor_.predict_features(
                 loc.to_model(pose))) @ L.T) ** 2))
 
