@@ -90,10 +90,11 @@ class ModeTracker:
         The EKF's body-frame inflation; default the localizer's calibrated consistency.
     drift : bool
         Give the EKF the divergence monitor's drift test alone
-        (``DivergenceMonitor(drift_only=True, drift_distance=DRIFT_DISTANCE)``): psi*
-        agreeing a little off it widens P towards them (a shove), with no restart or "lost"
-        of its own. Off by default, as the EKF's (``localization.filtering.divergence``:
-        on the global benchmark's tuning cities it pulled right beliefs onto biased psi*).
+        (``DivergenceMonitor(drift_only=True, drift_distance=DRIFT_DISTANCE)``, with its
+        default jump condition ``drift_change``): psi* suddenly agreeing a little off it
+        widens P towards them (a shove), with no restart or "lost" of its own. Off by
+        default, as the EKF's (``localization.filtering.divergence``: it pulled right
+        beliefs onto biased psi* on the global benchmark, held out at stop 54 too).
         Not with a localizer of several districts (whose EKF takes no monitor).
     free_space : callable, optional
         The map (``city.free_mask``), given to the EKF with its contact projection
