@@ -26,6 +26,7 @@ __all__ = [
     "body_to_world",
     "cov_to_triu",
     "pose_residual",
+    "position_std",
     "to_body",
     "triu_to_cov",
     "wrap_angle",
@@ -94,3 +95,10 @@ def triu_to_cov(v: ArrayLike) -> Array:
     P[..., _TRIU[0], _TRIU[1]] = v
     P[..., _TRIU[1], _TRIU[0]] = v
     return P
+
+
+def position_std(P: ArrayLike) -> float:
+    """The largest standard deviation (m) of a pose covariance's position block ``P[:2, :2]``
+    (0 if rounding makes it negative)."""
+    P = np.asarray(P, dtype=np.float64)
+    return float(np.sqrt(max(np.linalg.eigvalsh(P[:2, :2])[-1], 0.0)))

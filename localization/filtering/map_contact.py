@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from localization.filtering.log_weights import log_sum_exp
-from localization.geometry import Array, wrap_angle
+from localization.geometry import Array, position_std, wrap_angle
 
 __all__ = [
     "CONTACT_CLEARANCE",
@@ -205,7 +205,7 @@ def contact_contradicts(free_space: FreeSpace, x: Array, P: Array,
     A heading too uncertain for the bearing to say a side (2 sigma >= pi) falls back to
     the rule without one."""
     if bearing is None or not np.isfinite(bearing) or 4.0 * P[2, 2] >= np.pi ** 2:
-        sigma = float(np.sqrt(max(np.linalg.eigvalsh(P[:2, :2])[-1], 0.0)))
+        sigma = position_std(P)
         return bool(np.all(_free(free_space, np.asarray(x[None, :2], dtype=np.float64),
                                  CONTACT_CLEARANCE + 2.0 * sigma)))
     points, spacing = contact_points(x, P, float(bearing))
@@ -301,8 +301,7 @@ def contact_points(x: Array, P: Array, bearing: float, n: int = CONTACT_GRID
     grid = np.stack(np.meshgrid(t, t, t), -1).reshape(-1, 3)
     grid = grid[np.einsum("ij,ij->i", grid, grid) <= 1.0 + 1e-9]
     points = touched_points(x + 2.0 * grid @ L.T, bearing)
-    reach = float(np.sqrt(max(np.linalg.eigvalsh(P[:2, :2])[-1], 0.0))
-                  + ROBOT_RADIUS * np.sqrt(max(P[2, 2], 0.0)))
+    reach = position_std(P) + ROBOT_RADIUS * float(np.sqrt(max(P[2, 2], 0.0)))
     return points, float(np.sqrt(3.0) / 2.0 * 4.0 / (n - 1) * reach)
 
 

@@ -11,7 +11,7 @@ from sklearn.exceptions import NotFittedError
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from localization.filtering.ekf import PoseEKF, PoseMeasurement
-from localization.geometry import cov_to_triu, triu_to_cov
+from localization.geometry import cov_to_triu, position_std, triu_to_cov
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer
 from localization.wrappers import (
     BeliefWrapper,
@@ -47,6 +47,16 @@ def test_triu_round_trip():
     assert np.allclose(triu_to_cov(v), P, rtol=1e-6)
     with pytest.raises(ValueError, match="6"):
         triu_to_cov(np.zeros(5))
+
+
+def test_position_std_is_the_widest_position_axis():
+    """0.3 m along a rotated axis, 0.1 m across; the heading's variance does not count."""
+    c, s = np.cos(0.7), np.sin(0.7)
+    R = np.array([[c, -s], [s, c]])
+    P = np.diag([0.0, 0.0, 4.0])
+    P[:2, :2] = R @ np.diag([0.09, 0.01]) @ R.T
+    assert position_std(P) == pytest.approx(0.3)
+    assert position_std(np.zeros((3, 3))) == 0.0
 
 
 @pytest.mark.filterwarnings("ignore::UserWarning")  # env_checker: wrapped env, infinite Box

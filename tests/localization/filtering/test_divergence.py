@@ -126,7 +126,7 @@ def test_drift_change_fires_on_a_shove_once():
 def test_drift_change_ignores_a_bias_that_grows_slowly(change, fires):
     """psi* moving off the belief by 0.1 m a step (a biased stretch of map, not a shove):
     the plain drift test fires once four values agree beyond its distance, the change-only
-    one never does (no run of four jumps by more than drift_distance from the one before)."""
+    one never does (no run of four lies more than drift_change from the four before)."""
     m = DivergenceMonitor(drift_distance=DRIFT_DISTANCE, drift_steps=4, drift_change=change)
     feed(m, 8, 1.5, NEAR, False)
     verdicts = [feed(m, 1, 4.0, np.array([0.0, 0.1 * t, 0.0]), False)[0] for t in range(21)]
