@@ -300,6 +300,8 @@ def add_regression_samples(model: Any, W_new: Array, Theta_new: Array) -> Any:
         w = np.exp(-0.5 * d2[:, 1:] / model._pca_bw ** 2)
         Uw = local_pca(model._ws, model._ws[changed], ind[:, 1:], w, Gr.shape[1])
         Gr = (Gr @ Uw) @ np.swapaxes(Uw, 1, 2)
+    if getattr(model, "feature_precision_", None) is not None:  # first_order="forward"
+        Gr, _ = model._forward_first_order(changed, model.feature_precision_)
     model.Gr_[changed] = Gr
     _, ind_t = model._zv_tree.query(model._zv, k=model.jr_neighbors_ + 1)  # O(n log n), 4-D
     model.theta_radius_ = np.linalg.norm(

@@ -34,6 +34,8 @@ def save_regressor(model: Any, path: str | Path) -> None:
     arrays["w_radius_"], arrays["theta_radius_"] = model.w_radius_, model.theta_radius_
     arrays["neighbors_"] = g.neighbors_  # the kNN lists partial_fit updates (format 3)
     arrays["neighbor_distances_"] = g.neighbor_distances_
+    precision = getattr(model, "feature_precision_", None)  # first_order="forward"
+    arrays["feature_precision_"] = np.zeros((0, 0)) if precision is None else precision
     np.savez(path, settings=np.array(json.dumps(settings)), **arrays)
 
 
@@ -91,6 +93,11 @@ def load_regressor(cls: Any, path: str | Path) -> Any:
                      and model.Gr_.shape == (n, q, m) and model.GR_.shape == (n, q, d)
                      and p_ == m + d + len(model._per)
                      and (g.cut_ is None or g.cut_.shape[0] == n))
+        precision = data.get("feature_precision_", np.zeros((0, 0)))
+        model.feature_precision_ = (np.asarray(precision, dtype=np.float64) if precision.size
+                                    else None)
+        shapes_ok &= (model.feature_precision_ is None) == (model.first_order == "frames") and (
+            model.feature_precision_ is None or model.feature_precision_.shape == (m, m))
         if not shapes_ok:
             raise ValueError("inconsistent array shapes")
         if not all(np.isfinite(getattr(model if hasattr(model, k) else g, k)).all()

@@ -31,6 +31,7 @@ from localization.geometry import wrap_angle
 from localization.gse.alignment import _KERNELS
 from localization.gse.embedding import GrassmannStiefelEigenmaps
 from localization.gse.estimator_checks import regressor_expected_failed_checks
+from localization.gse.first_order import FIRST_ORDER, FORWARD_NEIGHBORS, forward_gls_jacobians
 from localization.gse.graph import (
     Array,
     cuts_keep_connected,
@@ -124,6 +125,12 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         the scalable path (faiss HNSW neighbours re-ranked by exact distance, AMG-
         preconditioned LOBPCG and CG; docs/method.md §17); "auto": "approximate" from
         :data:`~localization.gse.neighbors.APPROXIMATE_MIN_N` samples on.
+    first_order : {"frames", "forward"}, default="frames"
+        The first-order terms G_j of r*: the pseudo-inverse of the feature block of GSE's
+        recovery Jacobian ("frames"), or the generalised least-squares inverse of the
+        forward model w(theta) fitted on each sample's pose-space neighbours, in the metric
+        of its residual covariance ("forward", :mod:`~localization.gse.first_order`: less
+        shrinkage of psi* across a lane map, docs/method.md §8.5).
 
     Attributes
     ----------
@@ -140,6 +147,9 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         (standardised) and in pose space (scaled).
     pose_condition_ : ndarray of shape (n,)
         cond(G_v) at the samples.
+    feature_precision_ : ndarray of shape (m, m) or None
+        The inverse residual covariance of the forward model (first_order="forward"; None
+        with "frames"), in standardised feature units.
     loop_angle_ : ndarray of shape (n,) or None
         Angle along the detected position loop (None: no loop, or loop_cut="none").
     cut_ : ndarray of shape (n, c) or None
@@ -172,6 +182,7 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         "adaptive_bandwidth": ["boolean"],
         "agreement": [None, StrOptions({"auto"}), Interval(Real, 0, None, closed="neither")],
         "algorithm": [StrOptions(set(ALGORITHMS))],
+        "first_order": [StrOptions(set(FIRST_ORDER))],
     }
 
     def __init__(self, n_components: int | None = None, n_neighbors: int = 20,
@@ -183,7 +194,7 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
                  theta_scale_factor: float = 2.0, jr_neighbors: int | None = None,
                  kernel_grassmann: bool = False, loop_cut: str = "auto",
                  adaptive_bandwidth: bool = False, agreement: float | str | None = None,
-                 algorithm: str = "auto") -> None:
+                 algorithm: str = "auto", first_order: str = "frames") -> None:
         self.n_components = n_components
         self.n_neighbors = n_neighbors
         self.periodic = periodic
@@ -202,6 +213,7 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         self.adaptive_bandwidth = adaptive_bandwidth
         self.agreement = agreement
         self.algorithm = algorithm
+        self.first_order = first_order
 
     # --------------------------------------------------------------------- fit
     def __sklearn_tags__(self) -> Tags:
@@ -295,6 +307,9 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         s = np.linalg.svd(Hv, compute_uv=False)
         self.pose_condition_ = s[:, 0] / np.maximum(s[:, -1], np.finfo(float).tiny)
         self._setup()
+        self.feature_precision_ = None
+        if self.first_order == "forward":
+            self.Gr_, self.feature_precision_ = self._forward_first_order(np.arange(n))
         self._select_bandwidths(Ws, Theta, dist_w, ind_w)
         return self
 
@@ -371,6 +386,16 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
 
         self.bandwidth_theta_, _ = loo_bandwidth_chunked(
             n, chunk_t, grid if ad else grid * np.median(self.theta_radius_))
+
+    def _forward_first_order(self, rows: Array, precision: Array | None = None
+                             ) -> tuple[Array, Array]:
+        """G of r* at ``rows`` from the forward model (first_order="forward",
+        :mod:`~localization.gse.first_order`) and the residual precision used."""
+        k = min(FORWARD_NEIGHBORS, len(self.theta_) - 1)
+        return forward_gls_jacobians(
+            self._ws, self.GR_, lambda r: self._zv_tree.query(self._zv[r], k=k + 1)[1][:, 1:],
+            lambda r, ind: -self._pose_diff(self.theta_[r], self.theta_[ind]), rows, k,
+            precision=precision)
 
     def _setup(self) -> None:
         """Derived per-sample query structures (after fit or load)."""

@@ -157,6 +157,10 @@ class AppearanceBenchConfig:
                 "'patches' (8 x 8 patches, floor 0.001) chosen over 'channels' on tuning "
                 "cities 11-12 (daylight map, both with 128 components, percent within the three thresholds, at dusk 72 / 94 / 99 against 47 / 65 / 72, at "
                 "night 64 / 86 / 96 against 0 / 0 / 0)"})
+    first_order: str = field(default="frames", metadata={
+        "help": "the first-order terms of GSE's r* (GSERegressor(first_order=...)): frames "
+                "(GSE's recovery Jacobian) or forward (the features' forward model w(theta), "
+                "docs/method.md section 8.5)"})
     calibrate_on_belief: bool = field(default=False, metadata={
         "help": "refine each localizer's consistency on a drive on its own belief (in the "
                 "training's look) after the true-pose drive; off: on tuning cities 11-12 it "
@@ -235,11 +239,12 @@ def localizer_params(args: AppearanceBenchConfig) -> dict[str, Any]:
 
         weights = small_cnn_weights("perspective", "conditions")
         return {"features": "small_cnn",
-                "features_params": {"n_components": args.n_components, "weights": str(weights)}}
+                "features_params": {"n_components": args.n_components, "weights": str(weights)},
+                "regressor_params": {"first_order": args.first_order}}
     params: dict[str, Any] = {"n_components": args.n_components}
     if args.normalize != "none":
         params["normalize"] = args.normalize
-    return {"features_params": params}
+    return {"features_params": params, "regressor_params": {"first_order": args.first_order}}
 
 
 def features_label(args: AppearanceBenchConfig) -> str:
