@@ -62,6 +62,9 @@ class NoiseBenchConfig:
     motion_noise: float = field(default=0.1, metadata={"help": "env actuation noise"})
     noise_folds: int = field(default=5, metadata={
         "help": "K-fold refits of the heteroscedastic scale (3 split city 12's graph)"})
+    first_order: str = field(default="frames", metadata={
+        "help": "the first-order terms of GSE's r*: frames or forward (docs/method.md "
+                "section 8.5)"})
     seed: int = field(default=0, metadata={"help": "seed of the fit and the drives"})
     out_dir: str = field(default="results", metadata={
         "help": "where bench_noise.json/.md go"})
@@ -83,7 +86,8 @@ def fit(args: NoiseBenchConfig, city: int) -> Any:
         warnings.simplefilter("ignore")
         loc, _ = fit_city_localizer(
             env, n_train=args.n_train, lanes=args.lanes, n_drive=args.n_drive, seed=args.seed,
-            localizer_params={"noise_folds": args.noise_folds, "features_params": params},
+            localizer_params={"noise_folds": args.noise_folds, "features_params": params,
+                              "regressor_params": {"first_order": args.first_order}},
             calibrate_on_belief=False, measurements=("representation",), quality_steps=0)
     env.close()
     return loc
