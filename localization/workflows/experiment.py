@@ -39,19 +39,11 @@ from localization.gse.regressor import GSERegressor
 from localization.metrics import angular_rmse, rrmse
 from localization.model_selection import grid_search
 
-__all__ = ["GSE_GRID", "GSE_QUICK_GRID", "MethodResult", "evaluate_methods", "fit_gse", "position_errors",
+__all__ = ["GSE_GRID", "MethodResult", "evaluate_methods", "fit_gse", "position_errors",
            "whitened"]
 
 #: CV grid of the GSE regressor (JR bandwidth factors of the adaptive kernel: own grid).
-#: ``first_order``: r*'s first-order terms from GSE's frames or the forward model (docs/method.md
-#: §8.5); offered to the CV after tuning city 11's ImageNet route rows, where CV preferred
-#: "forward" on every camera and test RRMSE fell 0.0192 -> 0.0126 (fisheye), 0.0060 -> 0.0044
-#: (catadioptric), 0.126 -> 0.104 (perspective).
-GSE_GRID: dict[str, list[Any]] = {"n_neighbors": [10, 20], "theta_scale_factor": [100.0],
-                                  "first_order": ["frames", "forward"]}
-#: The quick run's grid (``appearance-nav reproduce --quick``, the test suite's).
-GSE_QUICK_GRID: dict[str, list[Any]] = {"n_neighbors": [10], "theta_scale_factor": [100.0],
-                                        "first_order": ["frames", "forward"]}
+GSE_GRID: dict[str, list[Any]] = {"n_neighbors": [10, 20], "theta_scale_factor": [100.0]}
 #: Factors of the adaptive JR bandwidth tried by leave-one-out. From 0.03: on the perspective
 #: route with ImageNet features (city 0's training split) LOO chose 0.1, the old grid's edge.
 ADAPTIVE_GRID = (0.03, 0.05, 0.07, 0.1, 0.15, 0.2, 0.3, 0.5, 0.7, 1.0)
