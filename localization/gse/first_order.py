@@ -24,8 +24,8 @@ scaled ones of ``_pose_diff`` (angles wrapped), so the cuts do not matter here.
 
 Measured on the appearance benchmark's daylight maps of tuning cities 11-12 (15000
 route-lane images, PixelPCA(128, patches), 300 test images per look): psi*'s slope of the
-predicted on the true offset across the lane 0.37-0.43 -> 0.52-0.57, images within
-(0.25 m, 2 deg) default 77-78 -> 82-84 %, overcast 75-76 -> 82-83 %, dusk 67-74 -> 73-76 %,
+predicted on the true offset across the lane 0.37-0.43 -> 0.52-0.56 in daylight, images within
+(0.25 m, 2 deg) default 77-78 -> 82-84 %, overcast 75-76 -> 82 %, dusk 67-74 -> 73-76 %,
 night 61-63 -> 60-63 % (K = 20, lam = 0.1; K = 10, 15, 30, 50 and lam = 0, 0.3 were tried).
 """
 
@@ -34,6 +34,8 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from scipy.linalg import pinvh
+from sklearn.covariance import shrunk_covariance
 
 from localization.gse.graph import Array
 
@@ -78,16 +80,12 @@ def forward_tangents(dTheta: Array, dW: Array) -> tuple[Array, Array]:
 
 
 def shrunk_precision(scatter: Array, dof: float, shrinkage: float) -> Array:
-    """Inverse of the residual covariance ``scatter / dof`` shrunk towards its mean variance:
-    ``S = (1 - shrinkage) S + shrinkage tr(S)/m I`` (m, m)."""
+    """Inverse of the residual covariance ``scatter / dof`` shrunk towards its mean variance,
+    ``S = (1 - shrinkage) S + shrinkage tr(S)/m I`` (scikit-learn's ``shrunk_covariance``),
+    (m, m); a pseudo-inverse (``scipy.linalg.pinvh``) if S is singular."""
     if not dof > 0:
         raise ValueError(f"no residual degrees of freedom for the forward fit (dof={dof})")
-    S = scatter / dof
-    m = len(S)
-    S = (1.0 - shrinkage) * S + shrinkage * np.trace(S) / m * np.eye(m)
-    vals, vecs = np.linalg.eigh(0.5 * (S + S.T))
-    floor = max(float(vals.max()), np.finfo(float).tiny) * 1e-10
-    return (vecs / np.maximum(vals, floor)) @ vecs.T
+    return pinvh(shrunk_covariance(scatter / dof, shrinkage))
 
 
 def gls_left_inverse(B: Array, precision: Array) -> Array:
@@ -100,7 +98,6 @@ def gls_left_inverse(B: Array, precision: Array) -> Array:
 
 def forward_gls_jacobians(Ws: Array, GR: Array, neighbors: Callable[[Array], Array],
                           pose_diff: Callable[[Array, Array], Array], rows: Array,
-                          n_neighbors: int = FORWARD_NEIGHBORS,
                           shrinkage: float = FORWARD_SHRINKAGE,
                           precision: Array | None = None) -> tuple[Array, Array]:
     """``G_j = GR_j (B_j^T P B_j)^-1 B_j^T P`` for the samples ``rows`` (see the module
@@ -120,7 +117,8 @@ def forward_gls_jacobians(Ws: Array, GR: Array, neighbors: Callable[[Array], Arr
         (len(rows), K, d), angles wrapped.
     rows : ndarray of int
         The samples whose G is wanted.
-    n_neighbors, shrinkage : the forward fit's K and the covariance shrinkage.
+    shrinkage : float
+        The covariance's shrinkage towards its mean variance.
     precision : ndarray (m, m), optional
         The residual precision P to use (e.g. the fitted one, when ``partial_fit`` adds
         samples); None estimates it from the residuals of ``rows``.

@@ -294,14 +294,15 @@ def add_regression_samples(model: Any, W_new: Array, Theta_new: Array) -> Any:
     moved = np.concatenate([w_hits, np.arange(n0, n)])  # feature-space neighbours changed
     d2, _ = model._query_w(model._ws[moved], model.jr_neighbors_ + 1)
     model.w_radius_[moved] = np.sqrt(d2[:, -1])  # column 0 is the row itself
-    Gr = pinv_blocks(H[:, :m, :])
-    if model.project_features:  # G_r = G_u^- pi_W: pi_W from the feature-space neighbours
-        d2, ind = model._query_w(model._ws[changed], model.n_neighbors + 1)
-        w = np.exp(-0.5 * d2[:, 1:] / model._pca_bw ** 2)
-        Uw = local_pca(model._ws, model._ws[changed], ind[:, 1:], w, Gr.shape[1])
-        Gr = (Gr @ Uw) @ np.swapaxes(Uw, 1, 2)
-    if getattr(model, "feature_precision_", None) is not None:  # first_order="forward"
+    if model.first_order == "forward":  # the forward model's G_r in the fitted metric
         Gr, _ = model._forward_first_order(changed, model.feature_precision_)
+    else:
+        Gr = pinv_blocks(H[:, :m, :])
+        if model.project_features:  # G_r = G_u^- pi_W: pi_W from the feature-space neighbours
+            d2, ind = model._query_w(model._ws[changed], model.n_neighbors + 1)
+            w = np.exp(-0.5 * d2[:, 1:] / model._pca_bw ** 2)
+            Uw = local_pca(model._ws, model._ws[changed], ind[:, 1:], w, Gr.shape[1])
+            Gr = (Gr @ Uw) @ np.swapaxes(Uw, 1, 2)
     model.Gr_[changed] = Gr
     _, ind_t = model._zv_tree.query(model._zv, k=model.jr_neighbors_ + 1)  # O(n log n), 4-D
     model.theta_radius_ = np.linalg.norm(

@@ -82,7 +82,8 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         GSE heat-kernel bandwidth (see :class:`GrassmannStiefelEigenmaps`).
     grassmann_kernel : str, default="binet_cauchy"
     project_features : bool, default=False
-        Use ``G_r = G_u^- pi_W`` with pi_W from local PCA of the w-sample.
+        Use ``G_r = G_u^- pi_W`` with pi_W from local PCA of the w-sample
+        (``first_order="frames"`` only).
     ridge : float, default=0.0
         Tikhonov term for ``G_v^{-1}``.
     bandwidth_grid : tuple of float
@@ -295,20 +296,21 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         self.gse_.fit(Z, cut=self.cut_)
         self.gse_.select_recovery_bandwidth()
         H = self.gse_.frames_
-        self.Gr_ = pinv_blocks(H[:, :m, :])
         Bq, _ = np.linalg.qr(H[:, :m, :])
         self._w_tangents = Bq
-        if self.project_features:
-            w = np.exp(-0.5 * (dist_w / (0.5 * np.median(dist_w[:, -1]))) ** 2)
-            U = local_pca(Ws, Ws, ind_w, w, q)
-            self.Gr_ = (self.Gr_ @ U) @ np.swapaxes(U, 1, 2)
+        if self.first_order == "frames":
+            self.Gr_ = pinv_blocks(H[:, :m, :])
+            if self.project_features:
+                w = np.exp(-0.5 * (dist_w / (0.5 * np.median(dist_w[:, -1]))) ** 2)
+                U = local_pca(Ws, Ws, ind_w, w, q)
+                self.Gr_ = (self.Gr_ @ U) @ np.swapaxes(U, 1, 2)
         Hv = H[:, m:, :]
         self.GR_ = pinv_blocks(Hv, self.ridge) @ self._dlift(Theta)
         s = np.linalg.svd(Hv, compute_uv=False)
         self.pose_condition_ = s[:, 0] / np.maximum(s[:, -1], np.finfo(float).tiny)
         self._setup()
         self.feature_precision_ = None
-        if self.first_order == "forward":
+        if self.first_order == "forward":  # needs GR_ and the pose tree of _setup
             self.Gr_, self.feature_precision_ = self._forward_first_order(np.arange(n))
         self._select_bandwidths(Ws, Theta, dist_w, ind_w)
         return self
@@ -394,7 +396,7 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         k = min(FORWARD_NEIGHBORS, len(self.theta_) - 1)
         return forward_gls_jacobians(
             self._ws, self.GR_, lambda r: self._zv_tree.query(self._zv[r], k=k + 1)[1][:, 1:],
-            lambda r, ind: -self._pose_diff(self.theta_[r], self.theta_[ind]), rows, k,
+            lambda r, ind: -self._pose_diff(self.theta_[r], self.theta_[ind]), rows,
             precision=precision)
 
     def _setup(self) -> None:
