@@ -88,18 +88,26 @@ def shrunk_precision(scatter: Array, dof: float, shrinkage: float) -> Array:
     return pinvh(shrunk_covariance(scatter / dof, shrinkage))
 
 
-def gls_left_inverse(B: Array, precision: Array) -> Array:
-    """``(B^T P B)^-1 B^T P`` (n, d, m) for tangents B (n, m, d) and precision P (m, m);
-    a pseudo-inverse where ``B^T P B`` is singular (a pose direction the features never
-    see)."""
+def gls_left_inverse(B: Array, precision: Array, ridge: float = 0.0) -> Array:
+    """``(I + rho I_d)^-1 B^T P`` (n, d, m) with ``I = B^T P B`` for tangents B (n, m, d)
+    and precision P (m, m); ``rho = ridge tr(I) / d`` per sample damps the pose directions
+    the features see least, relative to that sample's mean information (0: the plain
+    generalised least-squares inverse); a pseudo-inverse where the matrix is singular (a
+    pose direction the features never see)."""
     BtP = np.swapaxes(B, 1, 2) @ precision
-    return np.linalg.pinv(BtP @ B, hermitian=True) @ BtP
+    info = BtP @ B
+    d = info.shape[-1]
+    if ridge > 0:
+        rho = ridge * np.trace(info, axis1=1, axis2=2) / d
+        info = info + rho[:, None, None] * np.eye(d)
+    return np.linalg.pinv(info, hermitian=True) @ BtP
 
 
 def forward_gls_jacobians(Ws: Array, GR: Array, neighbors: Callable[[Array], Array],
                           pose_diff: Callable[[Array, Array], Array], rows: Array,
                           shrinkage: float = FORWARD_SHRINKAGE,
-                          precision: Array | None = None) -> tuple[Array, Array]:
+                          precision: Array | None = None, ridge: float = 0.0
+                          ) -> tuple[Array, Array]:
     """``G_j = GR_j (B_j^T P B_j)^-1 B_j^T P`` for the samples ``rows`` (see the module
     docstring), in chunks.
 
@@ -122,6 +130,8 @@ def forward_gls_jacobians(Ws: Array, GR: Array, neighbors: Callable[[Array], Arr
     precision : ndarray (m, m), optional
         The residual precision P to use (e.g. the fitted one, when ``partial_fit`` adds
         samples); None estimates it from the residuals of ``rows``.
+    ridge : float
+        The damping of weak pose directions in the inverse (:func:`gls_left_inverse`).
 
     Returns
     -------
@@ -144,5 +154,6 @@ def forward_gls_jacobians(Ws: Array, GR: Array, neighbors: Callable[[Array], Arr
         precision = shrunk_precision(scatter, dof, shrinkage)
     G = np.empty((len(rows), GR.shape[1], m))
     for s in range(0, len(rows), CHUNK):
-        G[s:s + CHUNK] = GR[rows[s:s + CHUNK]] @ gls_left_inverse(B[s:s + CHUNK], precision)
+        G[s:s + CHUNK] = GR[rows[s:s + CHUNK]] @ gls_left_inverse(B[s:s + CHUNK], precision,
+                                                                  ridge)
     return G, precision

@@ -132,6 +132,11 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         forward model w(theta) fitted on each sample's pose-space neighbours, in the metric
         of its residual covariance ("forward", :mod:`~localization.gse.first_order`: less
         shrinkage of psi* across a lane map, docs/method.md §8.5).
+    forward_ridge : float, default=0.0
+        first_order="forward" only: the inverse damps each sample's pose directions of least
+        feature information by ``forward_ridge`` x its mean information
+        (:func:`~localization.gse.first_order.gls_left_inverse`): less gain, so less
+        feature noise passed on, where the features barely see the pose.
 
     Attributes
     ----------
@@ -184,6 +189,7 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         "agreement": [None, StrOptions({"auto"}), Interval(Real, 0, None, closed="neither")],
         "algorithm": [StrOptions(set(ALGORITHMS))],
         "first_order": [StrOptions(set(FIRST_ORDER))],
+        "forward_ridge": [Interval(Real, 0, None, closed="left")],
     }
 
     def __init__(self, n_components: int | None = None, n_neighbors: int = 20,
@@ -195,7 +201,8 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
                  theta_scale_factor: float = 2.0, jr_neighbors: int | None = None,
                  kernel_grassmann: bool = False, loop_cut: str = "auto",
                  adaptive_bandwidth: bool = False, agreement: float | str | None = None,
-                 algorithm: str = "auto", first_order: str = "frames") -> None:
+                 algorithm: str = "auto", first_order: str = "frames",
+                 forward_ridge: float = 0.0) -> None:
         self.n_components = n_components
         self.n_neighbors = n_neighbors
         self.periodic = periodic
@@ -215,6 +222,7 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         self.agreement = agreement
         self.algorithm = algorithm
         self.first_order = first_order
+        self.forward_ridge = forward_ridge
 
     # --------------------------------------------------------------------- fit
     def __sklearn_tags__(self) -> Tags:
@@ -397,7 +405,7 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         return forward_gls_jacobians(
             self._ws, self.GR_, lambda r: self._zv_tree.query(self._zv[r], k=k + 1)[1][:, 1:],
             lambda r, ind: -self._pose_diff(self.theta_[r], self.theta_[ind]), rows,
-            precision=precision)
+            precision=precision, ridge=float(self.forward_ridge))
 
     def _setup(self) -> None:
         """Derived per-sample query structures (after fit or load)."""

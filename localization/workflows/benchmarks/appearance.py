@@ -163,6 +163,9 @@ class AppearanceBenchConfig:
                 "docs/method.md section 8.5); forward chosen on tuning cities 11-12 (daylight "
                 "map: within (0.25 m, 2 deg) 74 -> 80 % in daylight, dusk 71 -> 73, overcast "
                 "74 -> 78, night 63 -> 61; closed-loop RMSE 0.136 -> 0.104 m in daylight)"})
+    forward_ridge: float = field(default=0.0, metadata={
+        "help": "first_order=forward: damping of the pose directions the features see least "
+                "(GSERegressor(forward_ridge=...))"})
     calibrate_on_belief: bool = field(default=False, metadata={
         "help": "refine each localizer's consistency on a drive on its own belief (in the "
                 "training's look) after the true-pose drive; off: on tuning cities 11-12 it "
@@ -242,11 +245,19 @@ def localizer_params(args: AppearanceBenchConfig) -> dict[str, Any]:
         weights = small_cnn_weights("perspective", "conditions")
         return {"features": "small_cnn",
                 "features_params": {"n_components": args.n_components, "weights": str(weights)},
-                "regressor_params": {"first_order": args.first_order}}
+                "regressor_params": regressor_params(args)}
     params: dict[str, Any] = {"n_components": args.n_components}
     if args.normalize != "none":
         params["normalize"] = args.normalize
-    return {"features_params": params, "regressor_params": {"first_order": args.first_order}}
+    return {"features_params": params, "regressor_params": regressor_params(args)}
+
+
+def regressor_params(args: AppearanceBenchConfig) -> dict[str, Any]:
+    """The :class:`GSERegressor` settings of the benchmark's localizers."""
+    out: dict[str, Any] = {"first_order": args.first_order}
+    if args.first_order == "forward":
+        out["forward_ridge"] = args.forward_ridge
+    return out
 
 
 def features_label(args: AppearanceBenchConfig) -> str:

@@ -60,6 +60,19 @@ def test_gls_left_inverse_inverts_the_tangents_in_any_metric() -> None:
     np.testing.assert_allclose(G @ B, np.broadcast_to(np.eye(3), (6, 3, 3)), atol=1e-9)
 
 
+def test_gls_ridge_damps_only_the_weak_pose_direction() -> None:
+    """With ``ridge`` the inverse keeps the well-seen directions (gain ~1) and damps the
+    one the features barely see by ``info / (info + rho)``."""
+    B = np.zeros((1, 4, 3))
+    B[0, 0, 0], B[0, 1, 1], B[0, 2, 2] = 10.0, 10.0, 0.1  # pose direction 2 barely seen
+    P = np.eye(4)
+    gain = np.diag((gls_left_inverse(B, P, ridge=0.03) @ B)[0])
+    rho = 0.03 * (100 + 100 + 0.01) / 3
+    np.testing.assert_allclose(gain, [100 / (100 + rho), 100 / (100 + rho), 0.01 / (0.01 + rho)])
+    assert gain[0] > 0.97 and gain[2] < 0.01
+    np.testing.assert_array_equal(gls_left_inverse(B, P, ridge=0.0), gls_left_inverse(B, P))
+
+
 def test_shrunk_precision_is_the_inverse_of_the_shrunk_covariance() -> None:
     rng = np.random.default_rng(2)
     X = rng.normal(size=(50, 4)) * [1.0, 2.0, 0.1, 5.0]
@@ -135,3 +148,29 @@ def test_unknown_first_order_is_a_clear_error() -> None:
     W, T = _lane_data(6, 300)
     with pytest.raises(InvalidParameterError, match="first_order"):
         GSERegressor(n_components=3, first_order="backward").fit(W, T)
+    with pytest.raises(InvalidParameterError, match="forward_ridge"):
+        GSERegressor(n_components=3, first_order="forward", forward_ridge=-0.1).fit(W, T)
+
+
+def test_forward_ridge_is_saved_and_shrinks_the_gains(tmp_path) -> None:
+    """The damped inverse passes on less of a feature change than the plain one, and the
+    setting travels with the saved model (partial_fit uses it too)."""
+    W, T = _lane_data(7, 1300)
+    kw = {"n_components": 3, "n_neighbors": 10, "theta_scale_factor": 5.0,
+          "loop_cut": "none", "first_order": "forward", "out_of_domain": "nan"}
+    plain = GSERegressor(**kw).fit(W[:1200], T[:1200])
+    damped = GSERegressor(forward_ridge=0.3, **kw).fit(W[:1200], T[:1200])
+    assert np.median(np.linalg.norm(damped.Gr_, axis=(1, 2))) < \
+        0.95 * np.median(np.linalg.norm(plain.Gr_, axis=(1, 2)))
+    path = tmp_path / "damped.npz"
+    damped.save(path)
+    loaded = GSERegressor.load(path)
+    assert loaded.forward_ridge == 0.3
+    np.testing.assert_array_equal(loaded.predict(W[1200:]), damped.predict(W[1200:]))
+    Gr = damped.Gr_.copy()
+    damped.partial_fit(W[1200:], T[1200:])
+    grown = GSERegressor(forward_ridge=0.3, **kw).fit(W[:1200], T[:1200])
+    grown.forward_ridge = 0.0  # the new rows' G would then be the plain inverse's
+    grown.partial_fit(W[1200:], T[1200:])
+    assert not np.allclose(damped.Gr_[1200:], grown.Gr_[1200:])
+    assert Gr.shape[0] == 1200
