@@ -52,6 +52,8 @@ from localization.cli._args import (
     check_output_dir,
     check_output_file,
 )
+from localization.filtering.belief import NOISE_MODELS
+from localization.gse.first_order import FIRST_ORDER
 from localization.workflows.benchmarks import BENCHMARKS, benchmark
 from localization.workflows.benchmarks.agents import AgentsBenchConfig
 from localization.workflows.benchmarks.appearance import FEATURES as APPEARANCE_FEATURES
@@ -183,9 +185,11 @@ def _check_appearance_bench(c: AppearanceBenchConfig) -> None:
     check_choice("appearance_features", c.features, APPEARANCE_FEATURES)
     check_choice("appearance_lanes", c.lanes, LANE_SETS)
     check_choice("appearance_randomised_map", c.randomised_map, RANDOMISED_MAPS)
+    check_choice("appearance_first_order", c.first_order, FIRST_ORDER)
+    check_choice("appearance_noise", c.noise, NOISE_MODELS)
     check_numbers(c, positive=("image_size", "n_train", "n_drive", "n_components", "n_test",
                                "n_drives", "drive_steps"),
-                  non_negative=("motion_noise", "seed"), prefix="appearance_")
+                  non_negative=("motion_noise", "seed", "forward_ridge"), prefix="appearance_")
     check_output_dir("appearance_out_dir", c.out_dir)
 
 

@@ -56,6 +56,8 @@ from tqdm import tqdm
 
 from envs.conditions import experience_looks
 from envs.datasets import collect_dataset
+from localization._validation import check_choice
+from localization.filtering.belief import NOISE_MODELS
 from localization.geometry import wrap_angle
 from localization.workflows.benchmarks.appearance_report import markdown
 from localization.workflows.tracking import (
@@ -168,6 +170,10 @@ class AppearanceBenchConfig:
                 "(GSERegressor(forward_ridge=...)); 0.03 chosen over 0, 0.1 on tuning cities "
                 "11-12 (daylight map, single images within (0.25 m, 2 deg) mean of seven "
                 "presets 71.4 -> 72.6 %, sensor noise 67.5 -> 70, exposure 68 -> 70.5)"})
+    noise: str = field(default="global", metadata={
+        "help": "the closed loop's measurement noise: global (one R from the noise drive) or "
+                "heteroscedastic (R(theta, w) from 5-fold held-out residuals and the image's "
+                "novelty, docs/method.md section 15.4; five more GSE fits per localizer)"})
     calibrate_on_belief: bool = field(default=False, metadata={
         "help": "refine each localizer's consistency on a drive on its own belief (in the "
                 "training's look) after the true-pose drive; off: on tuning cities 11-12 it "
@@ -247,11 +253,18 @@ def localizer_params(args: AppearanceBenchConfig) -> dict[str, Any]:
         weights = small_cnn_weights("perspective", "conditions")
         return {"features": "small_cnn",
                 "features_params": {"n_components": args.n_components, "weights": str(weights)},
-                "regressor_params": regressor_params(args)}
+                "regressor_params": regressor_params(args), **noise_params(args)}
     params: dict[str, Any] = {"n_components": args.n_components}
     if args.normalize != "none":
         params["normalize"] = args.normalize
-    return {"features_params": params, "regressor_params": regressor_params(args)}
+    return {"features_params": params, "regressor_params": regressor_params(args),
+            **noise_params(args)}
+
+
+def noise_params(args: AppearanceBenchConfig) -> dict[str, Any]:
+    """``noise_folds`` of the localizers: 5 for the heteroscedastic R (``args.noise``)."""
+    check_choice(args.noise, "noise", NOISE_MODELS)
+    return {"noise_folds": 5} if args.noise == "heteroscedastic" else {}
 
 
 def regressor_params(args: AppearanceBenchConfig) -> dict[str, Any]:
@@ -291,14 +304,16 @@ def single_image_scores(loc: Any, images: np.ndarray, poses: np.ndarray) -> dict
             "within": [float(np.mean((pos <= m) & (yaw <= d))) for m, d in THRESHOLDS]}
 
 
-def closed_loop(env: OcclusionRecorder, loc: Any, lanes: str, steps: int, k: int, seed: int
-                ) -> dict[str, Any]:
+def closed_loop(env: OcclusionRecorder, loc: Any, lanes: str, steps: int, k: int, seed: int,
+                noise: str = "global") -> dict[str, Any]:
     """Drive ``k`` on the belief (around the route from path point ``600 k``, or a random
-    street tour): squared errors, run-averaged NEES, occlusion, jumps."""
+    street tour; measurement noise ``noise``): squared errors, run-averaged NEES, occlusion,
+    jumps."""
     if lanes == "route":
-        run = track_route(env, loc, "representation", steps, start=600 * k, seed=seed)
+        run = track_route(env, loc, "representation", steps, start=600 * k, seed=seed,
+                          noise=noise)
     else:
-        run = track_streets(env, loc, "representation", steps, seed=seed)
+        run = track_streets(env, loc, "representation", steps, seed=seed, noise=noise)
     err2 = np.sum((run.mean[:, :2] - run.true[:, :2]) ** 2, axis=1)
     shares = np.asarray(env.shares)
     step = np.hypot(*(np.diff(run.mean[:, :2], axis=0) - np.diff(run.true[:, :2], axis=0)).T)
@@ -363,7 +378,8 @@ def run_appearance_bench(args: AppearanceBenchConfig) -> dict[str, Any]:
                     single[t][c].append(single_image_scores(loc, images, poses))
                     for k in range(args.n_drives):
                         drives[t][c].append(closed_loop(env, loc, args.lanes,
-                                                        args.drive_steps, k, base + 100 + k))
+                                                        args.drive_steps, k, base + 100 + k,
+                                                        args.noise))
                 env.close()
                 bar.update()
     summary = {t: {c: summarize(single[t][c], drives[t][c]) if drives[t][c] else None
@@ -378,7 +394,7 @@ def run_appearance_bench(args: AppearanceBenchConfig) -> dict[str, Any]:
                        f"on {args.n_train} lane images per city (the randomised "
                        f"localizer's map images in {args.randomised_map} conditions); "
                        f"{args.n_test} test images and {args.n_drives} drive(s) of "
-                       f"{args.drive_steps} steps per city and condition"}
+                       f"{args.drive_steps} steps per city and condition, {args.noise} R"}
     (out / "bench_appearance.json").write_text(json.dumps(result, indent=2))
     (out / "bench_appearance.md").write_text(markdown(result))
     print(markdown(result))

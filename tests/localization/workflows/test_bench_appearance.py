@@ -14,6 +14,7 @@ from localization.cli.bench import Args, check
 from localization.workflows.benchmarks import BENCHMARKS, benchmark
 from localization.workflows.benchmarks.appearance import (
     AppearanceBenchConfig,
+    localizer_params,
     run_appearance_bench,
     single_image_scores,
     training_looks,
@@ -75,6 +76,26 @@ def test_calibrate_on_belief_reaches_the_fit(monkeypatch, flag):
     assert seen["calibrate_on_belief"] is flag
 
 
+def test_heteroscedastic_noise_fits_the_folds_and_reaches_the_drives(monkeypatch):
+    """--appearance-noise heteroscedastic: the localizers get K-fold residuals (R(theta, w)
+    needs them) and the closed loop's belief uses that R."""
+    from localization.workflows.benchmarks import appearance
+
+    assert "noise_folds" not in localizer_params(AppearanceBenchConfig())
+    args = AppearanceBenchConfig(noise="heteroscedastic")
+    assert localizer_params(args)["noise_folds"] == 5
+    seen = {}
+
+    def fake_track(env, loc, measurement, steps, **kwargs):
+        seen.update(kwargs)
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(appearance, "track_route", fake_track)
+    with pytest.raises(RuntimeError, match="stop here"):
+        appearance.closed_loop(None, None, "route", 10, 0, 1, args.noise)
+    assert seen["noise"] == "heteroscedastic"
+
+
 def test_experience_maps_are_daylight_and_a_draw_of_each_other_family():
     from localization.workflows.benchmarks.appearance import map_conditions
 
@@ -100,6 +121,9 @@ def test_targets_are_the_issues():
     ("randomised_map", "dusk", "--appearance-randomised-map"),
     ("cities", "31,x", "--appearance-cities"),
     ("n_test", 0, "--appearance-n-test"),
+    ("first_order", "backward", "--appearance-first-order"),
+    ("forward_ridge", -0.1, "--appearance-forward-ridge"),
+    ("noise", "robust", "--appearance-noise"),
 ])
 def test_bad_options_are_named(field, value, option):
     args = Args(only="appearance", appearance=AppearanceBenchConfig(**{field: value}))
