@@ -309,11 +309,12 @@ def closed_loop(env: OcclusionRecorder, loc: Any, lanes: str, steps: int, k: int
     """Drive ``k`` on the belief (around the route from path point ``600 k``, or a random
     street tour; measurement noise ``noise``): squared errors, run-averaged NEES, occlusion,
     jumps."""
+    options = {"filter_options": {"noise": noise}}
     if lanes == "route":
         run = track_route(env, loc, "representation", steps, start=600 * k, seed=seed,
-                          noise=noise)
+                          **options)
     else:
-        run = track_streets(env, loc, "representation", steps, seed=seed, noise=noise)
+        run = track_streets(env, loc, "representation", steps, seed=seed, **options)
     err2 = np.sum((run.mean[:, :2] - run.true[:, :2]) ** 2, axis=1)
     shares = np.asarray(env.shares)
     step = np.hypot(*(np.diff(run.mean[:, :2], axis=0) - np.diff(run.true[:, :2], axis=0)).T)

@@ -80,6 +80,7 @@ def test_heteroscedastic_noise_fits_the_folds_and_reaches_the_drives(monkeypatch
     """--appearance-noise heteroscedastic: the localizers get K-fold residuals (R(theta, w)
     needs them) and the closed loop's belief uses that R."""
     from localization.workflows.benchmarks import appearance
+    from localization.wrappers import FILTER_OPTIONS
 
     assert "noise_folds" not in localizer_params(AppearanceBenchConfig())
     args = AppearanceBenchConfig(noise="heteroscedastic")
@@ -93,7 +94,8 @@ def test_heteroscedastic_noise_fits_the_folds_and_reaches_the_drives(monkeypatch
     monkeypatch.setattr(appearance, "track_route", fake_track)
     with pytest.raises(RuntimeError, match="stop here"):
         appearance.closed_loop(None, None, "route", 10, 0, 1, args.noise)
-    assert seen["noise"] == "heteroscedastic"
+    assert seen["filter_options"] == {"noise": "heteroscedastic"}
+    assert set(seen["filter_options"]) <= set(FILTER_OPTIONS["ekf"])  # the wrapper takes it
 
 
 def test_experience_maps_are_daylight_and_a_draw_of_each_other_family():
@@ -164,3 +166,14 @@ def test_quick_run_on_the_condition_randomised_small_cnn(tmp_path: Path):
     s = saved["summary"]["daylight"]["default"]
     assert s["n_images"] == 30 and s["within"] == sorted(s["within"])
     assert math.isfinite(s["rmse"]) and s["rmse"] > 0
+
+
+def test_quick_run_on_the_heteroscedastic_noise(tmp_path: Path):
+    """The K-fold noise model is fitted and the drives run on R(theta, w)."""
+    result = run_appearance_bench(AppearanceBenchConfig(
+        quick=True, trainings="daylight", noise="heteroscedastic", out_dir=str(tmp_path)))
+    assert result["fit_failures"] == {}
+    assert "heteroscedastic R" in result["setup"]
+    for c in result["conditions"]:
+        s = result["summary"]["daylight"][c]
+        assert s["drives"] == 1 and math.isfinite(s["rmse"]) and math.isfinite(s["nees_mean"])
