@@ -19,7 +19,10 @@ function of the pose, which the training poses pin down without error:
 ``GR_j`` (q, d) is the pose-to-representation Jacobian R* already uses, so ``G_j B_j = GR_j``:
 a feature change the pose explains moves r* as the pose would, and the directions in which
 the features vary most without the pose (S, their residual covariance) count least (the
-Gauss-Markov estimator of the pose change behind a feature change). Pose differences are the
+Gauss-Markov estimator of the pose change behind a feature change). With ``ridge`` > 0
+(``GSERegressor(forward_ridge=...)``) the inverse is ``(I_j + rho_j 1)^-1 B_j^T S^-1``,
+``I_j = B_j^T S^-1 B_j``, ``rho_j = ridge tr(I_j) / d``: the pose directions a sample's
+features barely see pass less feature noise on (docs/method.md §8.5). Pose differences are the
 scaled ones of ``_pose_diff`` (angles wrapped), so the cuts do not matter here.
 
 Measured on the appearance benchmark's daylight maps of tuning cities 11-12 (15000
