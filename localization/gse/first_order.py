@@ -111,8 +111,8 @@ def forward_gls_jacobians(Ws: Array, GR: Array, neighbors: Callable[[Array], Arr
                           shrinkage: float = FORWARD_SHRINKAGE,
                           precision: Array | None = None, ridge: float = 0.0
                           ) -> tuple[Array, Array]:
-    """``G_j = GR_j (B_j^T P B_j)^-1 B_j^T P`` for the samples ``rows`` (see the module
-    docstring), in chunks.
+    """``G_j = GR_j (B_j^T P B_j + rho_j 1)^-1 B_j^T P`` for the samples ``rows`` (see the
+    module docstring; ``rho_j = 0`` without ``ridge``), in chunks.
 
     Parameters
     ----------
