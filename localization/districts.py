@@ -46,7 +46,7 @@ from localization._localizer_noise import check_data, novelty
 from localization._validation import check_array, check_int, check_real
 from localization.geometry import Array, body_to_world
 from localization.gse.graph import DisconnectedGraphError
-from localization.gse.inverse import refine_poses
+from localization.gse.inverse import refine_poses, verify_poses
 from localization.localizer import AppearanceLocalizer
 
 __all__ = ["District", "DistrictLocalizer", "district_cells", "transform_maps"]
@@ -374,11 +374,15 @@ class DistrictLocalizer(DistrictNoiseMixin):
         for d in self.districts_:
             d.check_ready()
 
-    def predict(self, images: ArrayLike, refine: int = 0) -> Array:
+    def predict(self, images: ArrayLike, refine: int = 0, verify: int = 0,
+                verify_margin: float = 3.0) -> Array:
         """psi* (n, 3) of images, each by the district chosen as in :meth:`initial_belief`
-        (NaN rows where no district's maps hold); ``refine`` > 0: that many Gauss-Newton
-        steps with the chosen district's maps (:meth:`AppearanceLocalizer.predict`)."""
+        (NaN rows where no district's maps hold); ``verify`` > 0, ``refine`` > 0: checked
+        against that many retrieved training poses, then refined by that many Gauss-Newton
+        steps, with the chosen district's maps (:meth:`AppearanceLocalizer.predict`)."""
         refine = check_int(refine, "refine", low=0)
+        verify = check_int(verify, "verify", low=0)
+        verify_margin = check_real(verify_margin, "verify_margin", low=1.0)
         out = []
         for w in self.transform(images):
             found = self.candidates(w)
@@ -386,10 +390,15 @@ class DistrictLocalizer(DistrictNoiseMixin):
                 out.append(np.full(3, np.nan))
                 continue
             _, k, x = found[0]
-            if refine:
+            if refine or verify:
                 loc, wk = self.districts_[k], self._views[k].select(w)[None]
-                theta = refine_poses(loc.regressor_, wk, loc.to_model(x), loc.feature_whitener(),
-                                     refine)
+                theta = loc.to_model(x)
+                if verify:
+                    theta, _ = verify_poses(loc.regressor_, wk, theta, loc.feature_whitener(),
+                                            verify, verify_margin)
+                if refine:
+                    theta = refine_poses(loc.regressor_, wk, theta, loc.feature_whitener(),
+                                         refine)
                 x = loc.from_model(theta)[0]
             out.append(x)
         return np.array(out)

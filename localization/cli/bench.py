@@ -35,6 +35,7 @@ for every benchmark chosen by ``--only`` before the first one starts.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -189,7 +190,11 @@ def _check_appearance_bench(c: AppearanceBenchConfig) -> None:
     check_choice("appearance_noise", c.noise, NOISE_MODELS)
     check_numbers(c, positive=("image_size", "n_train", "n_drive", "n_components", "n_test",
                                "n_drives", "drive_steps"),
-                  non_negative=("motion_noise", "seed", "forward_ridge"), prefix="appearance_")
+                  non_negative=("motion_noise", "seed", "forward_ridge", "verify"),
+                  prefix="appearance_")
+    if not (c.verify_margin >= 1.0 and math.isfinite(c.verify_margin)):
+        raise UsageError("appearance_verify_margin", "must be >= 1 (a candidate must explain "
+                         f"the image at least as well as psi*), got {c.verify_margin!r}")
     check_output_dir("appearance_out_dir", c.out_dir)
 
 

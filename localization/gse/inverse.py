@@ -16,6 +16,18 @@ is a few damped Gauss-Newton steps away from psi*(w): with J = L dPhi*/dtheta,
 (at most ``max_halvings`` halvings; a row without descent keeps its pose; periodic columns
 are wrapped). r*(w) and R* are no help here: psi*(w) already solves R*(theta) = r*(w) to
 numerical precision.
+
+A gross error of psi*(w) (a fold of the embedding, a look-alike view: the pose many metres
+or degrees off) is not a few steps away. :func:`verify_poses` checks psi*(w) against the
+poses of the training images whose features lie nearest to w (retrieval, then verification
+by the model, as visual-localization pipelines verify their retrieved candidates): with
+the same whitened cost,
+
+    theta_hat = theta_j*  if  margin * e(theta_j*)^T e(theta_j*) < e(psi*)^T e(psi*),
+    j* = argmin_j e(theta_j)^T e(theta_j)  over the k nearest training images j,
+
+else psi*(w). The margin keeps psi*'s sub-sample resolution wherever it explains the image
+about as well as the best candidate.
 """
 
 from __future__ import annotations
@@ -25,11 +37,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from localization._validation import check_array, check_int
+from localization._validation import check_array, check_int, check_real
 from localization.geometry import wrap_angle
 from localization.gse.graph import Array
 
-__all__ = ["feature_whitener", "refine_poses"]
+__all__ = ["feature_whitener", "refine_poses", "verify_poses"]
 
 
 def feature_whitener(cov: ArrayLike) -> Array:
@@ -97,6 +109,68 @@ def refine_poses(reg: Any, W: ArrayLike, theta0: ArrayLike, whitener: ArrayLike,
         moved = _line_search(reg, W[live], theta[live], step, L, cost, max_halvings)
         theta[live], e, J, cost = moved
     return theta
+
+
+def verify_poses(reg: Any, W: ArrayLike, theta0: ArrayLike, whitener: ArrayLike,
+                 n_candidates: int = 10, margin: float = 3.0) -> tuple[Array, Array]:
+    """psi*(w) checked against the poses of the ``n_candidates`` training images nearest to
+    w in feature space (see the module docstring), every row at once.
+
+    Parameters
+    ----------
+    reg : GSERegressor
+        Fitted; its ``kneighbors``, ``theta_`` and ``predict_features`` are used.
+    W : ndarray (n, m)
+        Features.
+    theta0 : ndarray (n, d)
+        psi*(W) in the regressor's coordinates; NaN rows (out of domain) stay NaN.
+    whitener : ndarray (m, m)
+        L of :func:`feature_whitener`.
+    n_candidates : int
+        Training images retrieved per row (10: on tuning cities 11-12 20 did no better).
+    margin : float
+        How many times better a candidate must explain w than psi*(w) (>= 1; 3 chosen over
+        2 and 4 on tuning cities 11-12, docs/benchmarks.md §9 "Stop 58").
+
+    Returns
+    -------
+    theta : ndarray (n, d)
+    switched : ndarray (n,) of bool
+        Rows where a candidate replaced psi*(w).
+    """
+    W = check_array(W, "W", finite=False)
+    theta = check_array(theta0, "theta0", finite=False).copy()
+    L = check_array(whitener, "whitener")
+    if W.ndim != 2 or theta.ndim != 2 or len(W) != len(theta) or L.shape != (W.shape[1],) * 2:
+        raise ValueError(f"W (n, m), theta0 (n, d) and whitener (m, m) disagree: W {W.shape}, "
+                         f"theta0 {theta.shape}, whitener {L.shape}")
+    k = check_int(n_candidates, "n_candidates", low=1)
+    margin = check_real(margin, "margin", low=1.0)
+    switched = np.zeros(len(W), dtype=bool)
+    live = np.flatnonzero(np.all(np.isfinite(theta), axis=1) & np.all(np.isfinite(W), axis=1))
+    if not len(live):
+        return theta, switched
+    _, ind = reg.kneighbors(W[live], k)
+    cand = reg.theta_[ind]  # (n_live, k, d)
+    costs = _costs(reg, np.repeat(W[live], ind.shape[1] + 1, axis=0),
+                   np.concatenate([theta[live, None], cand], axis=1).reshape(-1, theta.shape[1]),
+                   L).reshape(len(live), -1)
+    best = np.argmin(costs[:, 1:], axis=1)
+    better = margin * costs[np.arange(len(live)), 1 + best] < costs[:, 0]
+    rows = live[better]
+    theta[rows] = cand[better, best[better]]
+    switched[rows] = True
+    return theta, switched
+
+
+def _costs(reg: Any, W: Array, theta: Array, L: Array) -> Array:
+    """Whitened costs ``|L (w - Phi*(theta))|^2`` (n,), inf where Phi* is undefined."""
+    ok = np.flatnonzero(np.all(np.isfinite(theta), axis=1))
+    cost = np.full(len(W), np.inf)
+    if len(ok):
+        c = np.sum(((W[ok] - reg.predict_features(theta[ok])) @ L.T) ** 2, axis=1)
+        cost[ok] = np.where(np.isfinite(c), c, np.inf)
+    return cost
 
 
 def _whitened(reg: Any, W: Array, theta: Array, L: Array) -> tuple[Array, Array, Array]:
