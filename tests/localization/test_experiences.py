@@ -263,3 +263,27 @@ def test_predict_refines_with_the_chosen_look(exp, test_set):
         assert cost(x) <= cost(x0) + 1e-9
     with pytest.raises(ValueError, match="refine"):
         exp.predict(night[:2], refine=-1)
+
+
+def test_predict_verifies_with_the_chosen_look(exp, test_set):
+    """A pose the verification swapped in explains the image 3x better with the chosen
+    look's maps; every other row is psi*."""
+    _, _, night = test_set
+    psi = exp.predict(night[:20])
+    checked = exp.predict(night[:20], verify=10, verify_margin=3.0)
+    assert np.array_equal(np.isfinite(checked), np.isfinite(psi))
+    W = exp.transform(night[:20])
+    for w, x0, x in zip(W, psi, checked):
+        if not np.all(np.isfinite(x0)) or np.array_equal(x, x0):
+            continue
+        view = exp.local(x0, w)
+        loc, wk = view.localizer, view.select(w)[None]
+        L = loc.feature_whitener()
+
+        def cost(pose, loc=loc, wk=wk, L=L):
+            return float(np.sum(((wk - loc.regressor_.predict_features(
+                loc.to_model(pose))) @ L.T) ** 2))
+
+        assert 3.0 * cost(x) < cost(x0)
+    with pytest.raises(ValueError, match="verify_margin"):
+        exp.predict(night[:2], verify=3, verify_margin=0.0)

@@ -51,6 +51,34 @@ def test_refined_predict_explains_the_features_better(localizer, lane_data):
         quiet.predict(images[:2], refine=3)
 
 
+def test_verified_predict_explains_the_switched_images_better(localizer, lane_data):
+    import copy
+
+    images, _ = lane_data
+    W = localizer.transform(images[:60])
+    psi = localizer.predict(images[:60])
+    np.testing.assert_array_equal(localizer.predict(images[:60], verify=0), psi)
+    checked = localizer.predict(images[:60], verify=10, verify_margin=3.0)
+    assert np.array_equal(np.isfinite(checked), np.isfinite(psi))
+    L, reg = localizer.feature_whitener(), localizer.regressor_
+
+    def cost_of(poses, rows):
+        F = reg.predict_features(localizer.to_model(poses[rows]))
+        return np.sum(((W[rows] - F) @ L.T) ** 2, axis=1)
+
+    changed = np.all(np.isfinite(psi), axis=1) & np.any(checked != psi, axis=1)
+    assert changed.any()  # 12 of 60 on this coarse 32 x 32 map (2026-11-30)
+    assert np.all(3.0 * cost_of(checked, changed) < cost_of(psi, changed))
+    with pytest.raises(ValueError, match="verify"):
+        localizer.predict(images[:2], verify=-1)
+    with pytest.raises(ValueError, match="verify_margin"):
+        localizer.predict(images[:2], verify=5, verify_margin=0.9)
+    quiet = copy.deepcopy(localizer)
+    quiet.noise_ = {}
+    with pytest.raises(NotFittedError, match="noise"):
+        quiet.predict(images[:2], verify=5)
+
+
 def test_heading_cut_is_where_no_lane_goes(localizer):
     theta = localizer._from_model(localizer.regressor_.theta_)
     gap = np.abs(wrap_angle(theta[:, 2] - localizer.yaw_cut_))

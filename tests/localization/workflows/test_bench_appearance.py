@@ -126,6 +126,8 @@ def test_targets_are_the_issues():
     ("first_order", "backward", "--appearance-first-order"),
     ("forward_ridge", -0.1, "--appearance-forward-ridge"),
     ("noise", "robust", "--appearance-noise"),
+    ("verify", -1, "--appearance-verify"),
+    ("verify_margin", 0.5, "--appearance-verify-margin"),
 ])
 def test_bad_options_are_named(field, value, option):
     args = Args(only="appearance", appearance=AppearanceBenchConfig(**{field: value}))
