@@ -130,7 +130,7 @@ def verify_poses(reg: Any, W: ArrayLike, theta0: ArrayLike, whitener: ArrayLike,
         Training images retrieved per row (10: on tuning cities 11-12 20 did no better).
     margin : float
         How many times better a candidate must explain w than psi*(w) (>= 1; 3 chosen over
-        2 and 4 on tuning cities 11-12, docs/benchmarks.md §9 "Stop 58").
+        2 and 4 on tuning cities 11-12, docs/method.md §8.4).
 
     Returns
     -------
