@@ -317,8 +317,9 @@ class AppearanceLocalizer(ImageFeaturesMixin, NoiseModelMixin, BeliefInterfaceMi
         nearest to w in feature space, and replaced by the one whose Phi* explains w
         ``verify_margin`` times better under the features' noise R, if any
         (:func:`~localization.gse.inverse.verify_poses`, docs/method.md §8.4; 10 and 3 on
-        tuning cities 11-12: under every appearance preset the images more than 5 m or 10
-        deg off fell from 0.3-5 % to 0-2.3 %). ``refine`` > 0: then that many Gauss-Newton
+        tuning cities 11-12, nine appearance presets each: within (0.25 m, 2 deg) / (5 m,
+        10 deg) 74.8 / 98.6 -> 75.8 / 99.2 % on average, neutral on city 11, +2 / +1.4 on
+        city 12). Rows out of the domain stay NaN. ``refine`` > 0: then that many Gauss-Newton
         steps towards the pose whose Phi* best explains w under R
         (:func:`~localization.gse.inverse.refine_poses`; 3 steps: on tuning cities 12-13
         the median error of street-wide single images fell by 20-29 %). Both need
