@@ -18,7 +18,13 @@ from localization.gse.graph import Array, brute_knn, local_pca, same_side
 from localization.gse.jacobian_regression import gaussian_jr
 from localization.gse.validation import check_2d, validate_X
 
-__all__ = ["GSEQueryMixin"]
+__all__ = ["KDTREE_MAX_DIM", "GSEQueryMixin"]
+
+#: features up to this width answer a few rows from a KD-tree, wider ones from a GEMM over all
+#: samples: one query, 10 neighbours, of 6000-45000 PixelPCA rows (a 15000-image route map's
+#: leading columns), KD-tree / GEMM 0.03-0.18 / 0.10-0.78 ms at 16 features, 0.12-0.59 /
+#: 0.12-0.76 at 32, 0.21-1.94 / 0.16-1.26 at 64 and 0.36-5.5 / 0.15-2.8 at 128 (stop 58)
+KDTREE_MAX_DIM = 32
 
 
 class GSEQueryMixin:
@@ -68,11 +74,12 @@ class GSEQueryMixin:
 
     def _query_w(self, Ws: Array, k: int) -> tuple[Array, Array]:
         """k nearest training features (squared distances, indices) of standardised rows:
-        the HNSW index on the approximate path, else a KD-tree for a few rows (it beats a
-        GEMM over all samples) and a brute-force GEMM for many."""
+        the HNSW index on the approximate path, else a KD-tree for a few rows of at most
+        :data:`KDTREE_MAX_DIM` features (it beats a GEMM over all samples there) and a
+        brute-force GEMM otherwise."""
         if getattr(self, "_ws_index", None) is not None:
             return self._ws_index.query(Ws, k)
-        if len(Ws) <= 32:
+        if len(Ws) <= 32 and getattr(self, "_ws_tree", None) is not None:
             d, ind = self._ws_tree.query(Ws, k=k)
             return (np.asarray(d).reshape(len(Ws), -1) ** 2,
                     np.asarray(ind).reshape(len(Ws), -1))

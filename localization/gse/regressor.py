@@ -49,7 +49,7 @@ from localization.gse.jacobian_regression import (
 )
 from localization.gse.neighbors import ALGORITHMS, HNSWIndex, knn_graph_any, use_approximate
 from localization.gse.pose_block import PoseBlockMixin
-from localization.gse.queries import GSEQueryMixin
+from localization.gse.queries import KDTREE_MAX_DIM, GSEQueryMixin
 from localization.gse.validation import validate_X, validate_y
 
 __all__ = ["GSERegressor", "pinv_blocks"]
@@ -412,7 +412,7 @@ class GSERegressor(PoseBlockMixin, GSEQueryMixin, RegressorMixin, BaseEstimator)
         m = len(self.w_mean_)
         self._ws = np.ascontiguousarray(self.gse_.Z_[:, :m])  # contiguous: fast GEMM queries
         self._ws_sqn = (self._ws ** 2).sum(axis=1)
-        self._ws_tree = cKDTree(self._ws)
+        self._ws_tree = cKDTree(self._ws) if m <= KDTREE_MAX_DIM else None
         if self.gse_.algorithm_ == "approximate":
             if getattr(self, "_ws_index", None) is None:
                 self._ws_index = HNSWIndex(self._ws)

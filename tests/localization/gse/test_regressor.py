@@ -168,6 +168,26 @@ def test_predictions_are_samplewise(pose3):
     assert model.features_jacobian(Tt[:5]).shape == (5, 30, 3)
 
 
+def test_wide_features_answer_single_rows_without_a_kd_tree():
+    """Beyond KDTREE_MAX_DIM features a single row is answered by the GEMM the batches use
+    (a KD-tree is slower there): the same predictions as a KD-tree's neighbours give."""
+    from scipy.spatial import cKDTree
+
+    from localization.gse.queries import KDTREE_MAX_DIM
+
+    W, T, _ = regression_manifold(600, m=KDTREE_MAX_DIM + 16, seed=0)
+    Wt, _, _ = regression_manifold(10, m=KDTREE_MAX_DIM + 16, seed=1)
+    model = GSERegressor(n_neighbors=15).fit(W, T)
+    assert model._ws_tree is None
+    alone = np.array([model.predict(Wt[i:i + 1])[0] for i in range(len(Wt))])
+    np.testing.assert_allclose(alone, model.predict(Wt), atol=1e-12)
+    model._ws_tree, model._memo = cKDTree(model._ws), {}
+    np.testing.assert_allclose([model.predict(Wt[i:i + 1])[0] for i in range(len(Wt))], alone,
+                               atol=1e-12)
+    narrow = GSERegressor(n_neighbors=15).fit(W[:, :KDTREE_MAX_DIM], T)
+    assert narrow._ws_tree is not None
+
+
 def test_a_repeated_single_row_query_is_answered_once_and_copied(pose3):
     """A filter step asks r* (its measurement) and psi* (its monitor) of one image, and R*
     and its Jacobian (h and H) at one pose: the last row of each is remembered, the answers
