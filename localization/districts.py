@@ -383,7 +383,7 @@ class DistrictLocalizer(DistrictNoiseMixin):
         refine = check_int(refine, "refine", low=0)
         verify = check_int(verify, "verify", low=0)
         verify_margin = check_real(verify_margin, "verify_margin", low=1.0)
-        out = []
+        out, whiteners = [], {}  # each district's whitener, once
         for w in self.transform(images):
             found = self.candidates(w)
             if not found:
@@ -392,13 +392,11 @@ class DistrictLocalizer(DistrictNoiseMixin):
             _, k, x = found[0]
             if refine or verify:
                 loc, wk = self.districts_[k], self._views[k].select(w)[None]
-                theta = loc.to_model(x)
+                theta, L = loc.to_model(x), whiteners.setdefault(k, loc.feature_whitener())
                 if verify:
-                    theta, _ = verify_poses(loc.regressor_, wk, theta, loc.feature_whitener(),
-                                            verify, verify_margin)
+                    theta, _ = verify_poses(loc.regressor_, wk, theta, L, verify, verify_margin)
                 if refine:
-                    theta = refine_poses(loc.regressor_, wk, theta, loc.feature_whitener(),
-                                         refine)
+                    theta = refine_poses(loc.regressor_, wk, theta, L, refine)
                 x = loc.from_model(theta)[0]
             out.append(x)
         return np.array(out)

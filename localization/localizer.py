@@ -331,11 +331,11 @@ class AppearanceLocalizer(ImageFeaturesMixin, NoiseModelMixin, BeliefInterfaceMi
         self._check_fitted(noise=refine > 0 or verify > 0)
         W = self.transform(images)
         theta = self.regressor_.predict(W)
+        L = self.feature_whitener() if verify or refine else None
         if verify:
-            theta, _ = verify_poses(self.regressor_, W, theta, self.feature_whitener(), verify,
-                                    verify_margin)
+            theta, _ = verify_poses(self.regressor_, W, theta, L, verify, verify_margin)
         if refine:
-            theta = refine_poses(self.regressor_, W, theta, self.feature_whitener(), refine)
+            theta = refine_poses(self.regressor_, W, theta, L, refine)
         return self._from_model(theta)
 
     def feature_whitener(self) -> Array:

@@ -88,15 +88,10 @@ def refine_poses(reg: Any, W: ArrayLike, theta0: ArrayLike, whitener: ArrayLike,
     -------
     theta : ndarray (n, d)
     """
-    W = check_array(W, "W", finite=False)
-    theta = check_array(theta0, "theta0", finite=False).copy()
-    L = check_array(whitener, "whitener")
-    if W.ndim != 2 or theta.ndim != 2 or len(W) != len(theta) or L.shape != (W.shape[1],) * 2:
-        raise ValueError(f"W (n, m), theta0 (n, d) and whitener (m, m) disagree: W {W.shape}, "
-                         f"theta0 {theta.shape}, whitener {L.shape}")
+    W, theta, L = _check_inputs(W, theta0, whitener)
     n_iter = check_int(n_iter, "n_iter", low=0)
     max_halvings = check_int(max_halvings, "max_halvings", low=0)
-    live = np.flatnonzero(np.all(np.isfinite(theta), axis=1) & np.all(np.isfinite(W), axis=1))
+    live = _live_rows(W, theta)
     if not len(live) or not n_iter:
         return theta
     e, J, cost = _whitened(reg, W[live], theta[live], L)
@@ -127,7 +122,8 @@ def verify_poses(reg: Any, W: ArrayLike, theta0: ArrayLike, whitener: ArrayLike,
     whitener : ndarray (m, m)
         L of :func:`feature_whitener`.
     n_candidates : int
-        Training images retrieved per row (10: on tuning cities 11-12 20 did no better).
+        Training images retrieved per row (10: on tuning cities 11-12 20 gave the same
+        mean, docs/method.md §8.4).
     margin : float
         How many times better a candidate must explain w than psi*(w) (>= 1; 3 chosen over
         2 and 4 on tuning cities 11-12, docs/method.md §8.4).
@@ -138,16 +134,11 @@ def verify_poses(reg: Any, W: ArrayLike, theta0: ArrayLike, whitener: ArrayLike,
     switched : ndarray (n,) of bool
         Rows where a candidate replaced psi*(w).
     """
-    W = check_array(W, "W", finite=False)
-    theta = check_array(theta0, "theta0", finite=False).copy()
-    L = check_array(whitener, "whitener")
-    if W.ndim != 2 or theta.ndim != 2 or len(W) != len(theta) or L.shape != (W.shape[1],) * 2:
-        raise ValueError(f"W (n, m), theta0 (n, d) and whitener (m, m) disagree: W {W.shape}, "
-                         f"theta0 {theta.shape}, whitener {L.shape}")
+    W, theta, L = _check_inputs(W, theta0, whitener)
     k = check_int(n_candidates, "n_candidates", low=1)
     margin = check_real(margin, "margin", low=1.0)
     switched = np.zeros(len(W), dtype=bool)
-    live = np.flatnonzero(np.all(np.isfinite(theta), axis=1) & np.all(np.isfinite(W), axis=1))
+    live = _live_rows(W, theta)
     if not len(live):
         return theta, switched
     _, ind = reg.kneighbors(W[live], k)
@@ -161,6 +152,24 @@ def verify_poses(reg: Any, W: ArrayLike, theta0: ArrayLike, whitener: ArrayLike,
     theta[rows] = cand[better, best[better]]
     switched[rows] = True
     return theta, switched
+
+
+def _check_inputs(W: ArrayLike, theta0: ArrayLike, whitener: ArrayLike
+                  ) -> tuple[Array, Array, Array]:
+    """``W`` (n, m), a copy of ``theta0`` (n, d) and ``whitener`` (m, m) as float arrays
+    (ValueError naming the three when their shapes disagree)."""
+    W = check_array(W, "W", finite=False)
+    theta = check_array(theta0, "theta0", finite=False).copy()
+    L = check_array(whitener, "whitener")
+    if W.ndim != 2 or theta.ndim != 2 or len(W) != len(theta) or L.shape != (W.shape[1],) * 2:
+        raise ValueError(f"W (n, m), theta0 (n, d) and whitener (m, m) disagree: W {W.shape}, "
+                         f"theta0 {theta.shape}, whitener {L.shape}")
+    return W, theta, L
+
+
+def _live_rows(W: Array, theta: Array) -> Array:
+    """Rows with finite features and a finite start pose (the others keep theirs)."""
+    return np.flatnonzero(np.all(np.isfinite(theta), axis=1) & np.all(np.isfinite(W), axis=1))
 
 
 def _costs(reg: Any, W: Array, theta: Array, L: Array) -> Array:

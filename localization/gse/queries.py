@@ -23,7 +23,8 @@ __all__ = ["KDTREE_MAX_DIM", "GSEQueryMixin"]
 #: features up to this width answer a few rows from a KD-tree, wider ones from a GEMM over all
 #: samples: one query, 10 neighbours, of 6000-45000 PixelPCA rows (a 15000-image route map's
 #: leading columns), KD-tree / GEMM 0.03-0.18 / 0.10-0.78 ms at 16 features, 0.12-0.59 /
-#: 0.12-0.76 at 32, 0.21-1.94 / 0.16-1.26 at 64 and 0.36-5.5 / 0.15-2.8 at 128 (stop 58)
+#: 0.12-0.76 at 32, 0.21-1.94 / 0.16-1.26 at 64 and 0.36-5.5 / 0.15-2.8 at 128 (stop 58,
+#: docs/method.md §17)
 KDTREE_MAX_DIM = 32
 
 
@@ -37,6 +38,7 @@ class GSEQueryMixin:
     embedding_: Array
     out_of_domain: str
     _memo: dict[str, tuple[tuple[bytes, str], Array, Array | None]]
+    _ws_tree: Any  # a cKDTree of the standardised features, None beyond KDTREE_MAX_DIM
 
     def _check_w(self, W: Array) -> Array:
         check_is_fitted(self, "gse_")
@@ -79,7 +81,7 @@ class GSEQueryMixin:
         brute-force GEMM otherwise."""
         if getattr(self, "_ws_index", None) is not None:
             return self._ws_index.query(Ws, k)
-        if len(Ws) <= 32 and getattr(self, "_ws_tree", None) is not None:
+        if len(Ws) <= 32 and self._ws_tree is not None:
             d, ind = self._ws_tree.query(Ws, k=k)
             return (np.asarray(d).reshape(len(Ws), -1) ** 2,
                     np.asarray(ind).reshape(len(Ws), -1))

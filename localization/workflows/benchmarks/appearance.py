@@ -306,8 +306,7 @@ def single_image_scores(loc: Any, images: np.ndarray, poses: np.ndarray, verify:
     """Position (m) and heading (deg) errors of psi* per image (inf outside the domain;
     ``verify`` > 0: checked against that many retrieved training poses,
     :meth:`AppearanceLocalizer.predict`) and the share within each of :data:`THRESHOLDS`."""
-    pred = loc.predict(images, verify=verify, verify_margin=verify_margin) if verify else \
-        loc.predict(images)
+    pred = loc.predict(images, verify=verify, verify_margin=verify_margin)
     pos = np.hypot(*(pred[:, :2] - poses[:, :2]).T)
     yaw = np.degrees(np.abs(wrap_angle(pred[:, 2] - poses[:, 2])))
     bad = ~np.isfinite(pred).all(axis=1)
