@@ -61,6 +61,14 @@ def save_localizer(loc: Any, path: str | Path | io.BytesIO) -> None:
                         regressor=np.frombuffer(buf.getvalue(), dtype=np.uint8), **arrays)
 
 
+def saved_path(path: Path) -> Path:
+    """The file ``save(path)`` wrote: numpy's ``savez`` appends ``.npz`` to a name without it,
+    so ``load("maps/city")`` finds ``maps/city.npz`` when ``maps/city`` itself does not exist."""
+    if path.suffix != ".npz" and not path.exists():
+        return path.with_name(path.name + ".npz")
+    return path
+
+
 def read_file(path: str | Path | io.BytesIO, what: str = "AppearanceLocalizer",
               name: str = "") -> tuple[Any, dict[str, Any], dict[str, np.ndarray]]:
     """(path, JSON settings, arrays) of a saved localizer file of either kind, or of a buffer
@@ -69,7 +77,7 @@ def read_file(path: str | Path | io.BytesIO, what: str = "AppearanceLocalizer",
     if isinstance(path, io.BytesIO):
         path = _Named(path, name)
     else:
-        path = _check_path(path)
+        path = saved_path(_check_path(path))
         if not path.is_file():
             raise FileNotFoundError(f"no saved {what} file {path}")
     try:

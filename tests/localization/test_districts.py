@@ -233,3 +233,5 @@ def test_a_corrupt_file_names_itself(split, tmp_path):
         load_localizer(path)
     with pytest.raises(FileNotFoundError):
         DistrictLocalizer.load(tmp_path / "nowhere.npz")
+    split.save(tmp_path / "no_suffix")  # written as no_suffix.npz, found from the same path
+    assert DistrictLocalizer.load(tmp_path / "no_suffix").n_features_ == split.n_features_

@@ -145,6 +145,18 @@ def test_save_load_round_trip(localizer, lane_data, tmp_path):
         AppearanceLocalizer.load(bad)
 
 
+def test_load_takes_the_path_given_to_save(localizer, lane_data, tmp_path):
+    """numpy's savez appends ".npz" to a name without it; load finds that file from the same
+    path (a user's save("maps/city") then load("maps/city") works)."""
+    localizer.save(tmp_path / "maps" / "city")
+    assert (tmp_path / "maps" / "city.npz").is_file()
+    again = AppearanceLocalizer.load(tmp_path / "maps" / "city")
+    images = lane_data[0][:5]
+    assert np.array_equal(localizer.predict(images), again.predict(images), equal_nan=True)
+    with pytest.raises(FileNotFoundError, match="elsewhere"):
+        AppearanceLocalizer.load(tmp_path / "elsewhere")
+
+
 def test_fit_is_deterministic_and_k_fold_noise(lane_data):
     images, poses = lane_data
     a = AppearanceLocalizer(features_params={"n_components": 8}, noise_folds=2)
