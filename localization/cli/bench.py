@@ -231,7 +231,8 @@ def _check_city60_bench(c: City60BenchConfig) -> None:
     check_choice("city60_features", c.features, STREET_FEATURES)
     check_numbers(c, positive=("city_size", "image_size", "density", "n_components", "n_drive",
                                "n_drives", "drive_steps", "episodes", "districts"),
-                  non_negative=("motion_noise", "max_episode_steps", "seed", "overlap"),
+                  non_negative=("motion_noise", "max_episode_steps", "seed", "overlap",
+                                "heading_check"),
                   prefix="city60_")
     try:
         check_city_layout(c.city_size)

@@ -44,6 +44,7 @@ from localization.filtering.ekf import (
     check_gate_probability,
     check_motion_model,
 )
+from localization.filtering.heading_check import check_heading_check, turns_away
 from localization.filtering.localizer_protocol import Localizer, check_localizer
 from localization.filtering.map_contact import (
     CONTACT_LOST_STEPS,
@@ -121,6 +122,15 @@ class BeliefFilter(RecoveryMixin):
         touches, moves to that wall (tuning cities 13-14, pushed, 200 episodes: 0.08
         contact steps per episode against 0.12, nominal and kidnapped unchanged at 0.00).
         False: the contact only makes the belief "lost", as before.
+    heading_check : float or None
+        With the "representation" model: each update is checked against the image's own
+        pose regression psi*(w) by the same map (the district or look in charge). An image
+        whose psi* is undefined (its representation lies off the map's sample domain) is
+        "out_of_domain", and an accepted update that leaves the heading more than
+        ``heading_check`` rad further from psi*'s heading than the prior was is undone
+        ("gated"): the linearised update ``H^-1 y`` can read an along-track offset as a
+        turn where R* is poorly conditioned, which psi* (the regression's own inverse) does
+        not (docs/method.md §13.3). None: off.
 
     Attributes
     ----------
@@ -140,7 +150,8 @@ class BeliefFilter(RecoveryMixin):
                  inflate_factor: float = 2.0,
                  detect_divergence: bool | dict[str, Any] = False,
                  noise: str = "global", free_space: FreeSpace | None = None,
-                 contact_motion: str = "blocked", project_contacts: bool = True) -> None:
+                 contact_motion: str = "blocked", project_contacts: bool = True,
+                 heading_check: float | None = None) -> None:
         check_localizer(localizer)
         check_choice(noise, "noise", NOISE_MODELS)
         self.contact_motion = check_choice(contact_motion, "contact_motion", CONTACT_MOTIONS)
@@ -181,6 +192,7 @@ class BeliefFilter(RecoveryMixin):
         self._refused: ViewOdometer | None = None  # odometry since a stalled trial
         self._repeat_view = False  # this step's accepted image was a repeat of the trial's
         self.free_space = check_free_space(free_space)
+        self.heading_check = check_heading_check(heading_check, measurement)
         self.project_contacts = check_bool(project_contacts, "project_contacts")
         self._bumped = 0  # steps left "lost" after a contact that contradicts the belief
         self._since_contact = REPEAT_CONTACT_STEPS + 1  # steps since the last city contact
@@ -409,13 +421,21 @@ class BeliefFilter(RecoveryMixin):
     def _update(self, w: Array) -> tuple[float, str]:
         assert self.ekf is not None
         z, self.model = self._measurement(self.ekf.x, w)
-        if not np.all(np.isfinite(z)):
+        psi = None if self.heading_check is None else self._local(self.ekf.x, w)[0].measure(
+            w, "pose")
+        if not np.all(np.isfinite(z)) or (psi is not None and not np.all(np.isfinite(psi))):
             return np.nan, "out_of_domain"
+        x0, P0 = self.ekf.x.copy(), self.ekf.P.copy()
         try:
             self.last_update = self.ekf.update(z, self.model)
         except OutOfDomainError:
             return np.nan, "out_of_domain"
-        return self.last_update.nis, "accepted" if self.last_update.accepted else "gated"
+        if not self.last_update.accepted:
+            return self.last_update.nis, "gated"
+        if psi is not None and turns_away(x0[2], self.ekf.x[2], psi[2], self.heading_check):
+            self.ekf.x, self.ekf.P = x0, P0  # the update read the image as a turn psi* denies
+            return self.last_update.nis, "gated"
+        return self.last_update.nis, "accepted"
 
     def run(self, W: ArrayLike, controls: ArrayLike, x0: ArrayLike | None = None,
             P0: ArrayLike | None = None) -> tuple[Array, Array, list[str]]:

@@ -95,6 +95,10 @@ class City60BenchConfig:
         "help": "metres of training images shared by neighbouring districts"})
     filter: str = field(default="ekf", metadata={
         "help": "the belief of the tours and the agent: 'ekf' or 'particles'"})
+    heading_check: float = field(default=0.05, metadata={
+        "help": "the EKF undoes a representation update that turns its heading more than this "
+                "(rad) away from the image's own psi* (BeliefFilter heading_check; chosen on "
+                "city 53); 0: off"})
     n_drive: int = field(default=1500, metadata={"help": "steps of each noise-calibration drive"})
     n_drives: int = field(default=3, metadata={"help": "street tours per city"})
     drive_steps: int = field(default=1000, metadata={"help": "steps of each street tour"})
@@ -166,8 +170,11 @@ def tours(args: City60BenchConfig, env: gym.Env, loc: Any, base: int) -> list[di
 
 def _belief(args: City60BenchConfig) -> dict[str, Any]:
     """BeliefWrapper options of ``args.filter`` (the particles spread over the city's free
-    streets by default)."""
-    return {} if args.filter == "ekf" else {"filter": "particles"}
+    streets by default; the EKF with ``heading_check`` unless it is 0)."""
+    if args.filter != "ekf":
+        return {"filter": "particles"}
+    return {"filter_options": {"heading_check": args.heading_check}} if args.heading_check \
+        else {}
 
 
 def agent_runs(args: City60BenchConfig, loc: Any, city: int, base: int
@@ -258,9 +265,15 @@ def _result(args: City60BenchConfig, records: dict[int, dict[str, Any]],
                      f"{args.motion_noise}, {features_label(args.features, args.n_components)} "
                      f"on {args.density:g} "
                      f"street-lane images per m^2 of street, "
-                     f"{_maps(args)}, {args.filter} belief; {args.n_drives} street tour(s) of "
+                     f"{_maps(args)}, {_filter_label(args)}; {args.n_drives} street tour(s) of "
                      f"{args.drive_steps} steps and {args.episodes} agent episode(s) "
                      f"(<= {limit} steps) per city"}
+
+
+def _filter_label(args: City60BenchConfig) -> str:
+    if args.filter == "ekf" and args.heading_check:
+        return f"ekf belief, heading checked against psi* ({args.heading_check:g} rad)"
+    return f"{args.filter} belief"
 
 
 def _maps(args: City60BenchConfig) -> str:
