@@ -130,7 +130,7 @@ class BeliefFilter(RecoveryMixin):
         ``heading_check`` rad further from psi*'s heading than the prior was is undone
         ("gated"): the linearised update ``H^-1 y`` can read an along-track offset as a
         turn where R* is poorly conditioned, which psi* (the regression's own inverse) does
-        not (docs/method.md §13.3). None: off.
+        not (docs/method.md §13.4). None: off.
 
     Attributes
     ----------

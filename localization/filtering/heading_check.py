@@ -1,4 +1,4 @@
-"""The heading check of the belief filter's "representation" updates (docs/method.md §13.3).
+"""The heading check of the belief filter's "representation" updates (docs/method.md §13.4).
 
 The representation model's update is linearised: its pose-equivalent innovation is
 ``H^-1 (r*(w) - R*(x))``. Where R* is poorly conditioned (a 60 m city's street maps, a few
