@@ -101,7 +101,7 @@ class RecoveryMixin:
         image does not fit is refused; the belief is left alone)."""
         prior, kept, forced = self.ekf, (self.misses, self.gated), self._forced
         self._start(x0, P0)
-        z, model = self._measurement(self.ekf.x, w)
+        z, model, _ = self._measurement(self.ekf.x, w)
         try:
             ok = bool(np.all(np.isfinite(z))) and self.ekf.update(z, model).accepted
         except OutOfDomainError:
@@ -162,7 +162,7 @@ class RecoveryMixin:
         """Predict with this step's ``motion`` and update the EKF a restart replaced; whether
         it accepted the image."""
         old.predict(*motion)
-        z, model = self._measurement(old.x, w)
+        z, model, _ = self._measurement(old.x, w)
         try:
             return bool(np.all(np.isfinite(z))) and old.update(z, model).accepted
         except OutOfDomainError:

@@ -123,14 +123,10 @@ class BeliefFilter(RecoveryMixin):
         contact steps per episode against 0.12, nominal and kidnapped unchanged at 0.00).
         False: the contact only makes the belief "lost", as before.
     heading_check : float or None
-        With the "representation" model: each update is checked against the image's own
-        pose regression psi*(w) by the same map (the district or look in charge). An image
-        whose psi* is undefined (its representation lies off the map's sample domain) is
-        "out_of_domain", and an accepted update that leaves the heading more than
-        ``heading_check`` rad further from psi*'s heading than the prior was is undone
-        ("gated"): the linearised update ``H^-1 y`` can read an along-track offset as a
-        turn where R* is poorly conditioned, which psi* (the regression's own inverse) does
-        not (docs/method.md §13.4). None: off.
+        With the "representation" model: check each update against the image's own psi* by
+        the same map (:mod:`~localization.filtering.heading_check`): an image without psi*
+        is "out_of_domain", an update turning the heading more than this (rad) away from
+        psi*'s is undone ("gated"). None: off.
 
     Attributes
     ----------
@@ -226,15 +222,15 @@ class BeliefFilter(RecoveryMixin):
             self._models[id(view)] = model
         return view, model
 
-    def _measurement(self, x: Array, w: Array) -> tuple[Array, Any]:
-        """The measurement z of image ``w`` and its model, by the localizer in charge at
-        ``x``; the model has observed ``w``."""
+    def _measurement(self, x: Array, w: Array) -> tuple[Array, Any, Localizer]:
+        """The measurement z of image ``w``, its model and the localizer in charge at ``x``
+        that made both; the model has observed ``w``."""
         view, model = self._local(x, w)
         z = view.measure(w, self.measurement)
         observe = getattr(model, "observe", None)
         if callable(observe) and np.all(np.isfinite(z)):
             observe(w)  # an R that depends on the image (heteroscedastic)
-        return z, model
+        return z, model, view
 
     def _Q(self, x: Array, u: Array) -> Array:
         return self.localizer.process_noise(x, alpha=self.alpha)
@@ -420,22 +416,22 @@ class BeliefFilter(RecoveryMixin):
 
     def _update(self, w: Array) -> tuple[float, str]:
         assert self.ekf is not None
-        z, self.model = self._measurement(self.ekf.x, w)
-        psi = None if self.heading_check is None else self._local(self.ekf.x, w)[0].measure(
-            w, "pose")
-        if not np.all(np.isfinite(z)) or (psi is not None and not np.all(np.isfinite(psi))):
+        z, self.model, view = self._measurement(self.ekf.x, w)
+        psi = None if self.heading_check is None or not np.all(np.isfinite(z)) else \
+            view.measure(w, "pose")  # psi* by the same map: the heading check's reference
+        if not (np.all(np.isfinite(z)) and (psi is None or np.all(np.isfinite(psi)))):
             return np.nan, "out_of_domain"
-        x0, P0 = self.ekf.x.copy(), self.ekf.P.copy()
+        prior = self.ekf.x.copy(), self.ekf.P.copy()
         try:
             self.last_update = self.ekf.update(z, self.model)
         except OutOfDomainError:
             return np.nan, "out_of_domain"
-        if not self.last_update.accepted:
-            return self.last_update.nis, "gated"
-        if psi is not None and turns_away(x0[2], self.ekf.x[2], psi[2], self.heading_check):
-            self.ekf.x, self.ekf.P = x0, P0  # the update read the image as a turn psi* denies
-            return self.last_update.nis, "gated"
-        return self.last_update.nis, "accepted"
+        accepted = self.last_update.accepted
+        if accepted and psi is not None and turns_away(prior[0][2], self.ekf.x[2], psi[2],
+                                                       self.heading_check):
+            self.ekf.x, self.ekf.P = prior  # the update read the image as a turn psi* denies
+            accepted = False
+        return self.last_update.nis, "accepted" if accepted else "gated"
 
     def run(self, W: ArrayLike, controls: ArrayLike, x0: ArrayLike | None = None,
             P0: ArrayLike | None = None) -> tuple[Array, Array, list[str]]:
