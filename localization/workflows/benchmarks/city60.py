@@ -33,7 +33,9 @@ square metre (48000) folds: psi*'s median error 10.1 m, belief RMSE 31.6 m. 3 x 
 of the same images: median 0.22 m (but 22 % of images off by more than 1 m), and one of
 three 1000-step tours lost (0.66 m RMSE). At the default city's density, 47 a square metre
 (94000 images; the nine fits take about 5 minutes): tours of 0.047, 0.122 and 0.083 m. A fit
-whose neighbour graph falls apart is reported (``fit_failures``) and the run goes on.
+whose neighbour graph falls apart is reported (``fit_failures``) and the run goes on. With
+``localizer_dir`` each city's fit is saved and a later run loads it (trying filter settings
+on the same maps without the half hour a city's fit takes).
 """
 
 from __future__ import annotations
@@ -58,6 +60,8 @@ from agents.evaluation import as_records, run_episodes, summarize
 from agents.scripted import ScriptedAgent
 from agents.sources import make_pose_env
 from envs.datasets import collect_dataset
+from localization.loading import load_localizer
+from localization.localizer import city_info
 from localization.workflows.benchmarks.coverage import summarize_drives
 from localization.workflows.benchmarks.street_features import features_label, localizer_features
 from localization.workflows.tracking import (
@@ -110,6 +114,11 @@ class City60BenchConfig:
     quick: bool = field(default=False, metadata={"help": "smoke run: one small city, tiny fits"})
     seed: int = field(default=0, metadata={"help": "seed of fits, drives and episodes"})
     out_dir: str = field(default="results", metadata={"help": "where bench_city60.json/.md go"})
+    localizer_dir: str = field(default="", metadata={
+        "help": "a folder for the fitted localizers (about 0.8 GB a city): each city's fit is "
+                "saved there as localizer_<city>.npz and loaded from there when the file "
+                "exists (same settings), so another run of the tours and the agent skips the "
+                "fit; empty: fit every run, save nothing"})
 
     def resolved(self) -> City60BenchConfig:
         """The settings actually run (``quick``: one city, 32 px, small fits, short runs)."""
@@ -145,6 +154,28 @@ def fit_city(args: City60BenchConfig, env: gym.Env) -> tuple[Any, dict[str, floa
             districts=None if args.districts == 1 else (args.districts, args.districts),
             overlap=args.overlap)
     return loc, seconds, n_train
+
+
+def localizer_path(args: City60BenchConfig, city: int) -> Path | None:
+    """Where ``city``'s localizer is kept (None without ``localizer_dir``)."""
+    return Path(args.localizer_dir) / f"localizer_{city}.npz" if args.localizer_dir else None
+
+
+def fit_or_load(args: City60BenchConfig, env: gym.Env, city: int
+                ) -> tuple[Any, dict[str, float], int]:
+    """:func:`fit_city`, or the localizer saved at :func:`localizer_path` by an earlier run
+    (checked against the env's city); a new fit is saved there."""
+    path = localizer_path(args, city)
+    if path is not None and path.exists():
+        t = time.perf_counter()
+        loc = load_localizer(path)
+        loc.check_city(city_info(env))
+        return loc, {"load": time.perf_counter() - t}, street_train_size(env, args.density)
+    loc, sec, n_train = fit_city(args, env)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        loc.save(path)
+    return loc, sec, n_train
 
 
 def single_image_errors(args: City60BenchConfig, env: gym.Env, loc: Any, seed: int
@@ -298,7 +329,7 @@ def run_city60_bench(args: City60BenchConfig) -> dict[str, Any]:
         base = args.seed + 10_000 * (i + 1)
         env = make_env(args, city)
         try:
-            loc, sec, n_train = fit_city(args, env)
+            loc, sec, n_train = fit_or_load(args, env, city)
         except ValueError as err:  # e.g. GSE's neighbour graph leaves samples on their own
             failures.append(f"city {city}: {err}")
             env.close()

@@ -92,3 +92,30 @@ def test_a_failed_fit_is_reported_and_the_run_goes_on(tmp_path: Path, monkeypatc
     saved = json.loads((tmp_path / "bench_city60.json").read_text())
     assert saved["fit_failures"] == result["fit_failures"]
     assert "Fit failed: city 51" in (tmp_path / "bench_city60.md").read_text()
+
+
+def test_a_saved_localizer_is_reused_for_its_city_only(tmp_path: Path, monkeypatch):
+    from localization.workflows.benchmarks import city60
+
+    maps = tmp_path / "maps"
+    first = run_city60_bench(City60BenchConfig(quick=True, out_dir=str(tmp_path / "a"),
+                                               localizer_dir=str(maps)))
+    assert (maps / "localizer_51.npz").is_file()
+
+    def refit(args, env):
+        raise AssertionError("the saved localizer should have been loaded")
+
+    monkeypatch.setattr(city60, "fit_city", refit)
+    again = run_city60_bench(City60BenchConfig(quick=True, out_dir=str(tmp_path / "b"),
+                                               localizer_dir=str(maps)))
+    assert again["fit_failures"] == []
+    for before, after in zip(first["records"]["51"]["drives"], again["records"]["51"]["drives"]):
+        before.pop("ms_per_step"), after.pop("ms_per_step")  # a clock, not a result
+        assert after == before  # the same maps, the same tour
+    assert set(again["stage_seconds"][0]) >= {"city", "load", "tours"}
+    # a file that holds another city's maps is reported, not used
+    (maps / "localizer_51.npz").rename(maps / "localizer_52.npz")
+    other = run_city60_bench(City60BenchConfig(quick=True, cities="52", localizer_dir=str(maps),
+                                               out_dir=str(tmp_path / "c")))
+    assert other["summary"] == {}
+    assert other["fit_failures"][0].startswith("city 52: ") and "city" in other["fit_failures"][0][9:]
