@@ -230,7 +230,8 @@ def _check_city60_bench(c: City60BenchConfig) -> None:
     check_int_list("city60_cities", c.cities, minimum=0)
     check_choice("city60_features", c.features, STREET_FEATURES)
     check_numbers(c, positive=("city_size", "image_size", "density", "n_components", "n_drive",
-                               "n_drives", "drive_steps", "episodes", "districts"),
+                               "n_drives", "drive_steps", "episodes", "districts",
+                               "lane_heading"),
                   non_negative=("motion_noise", "max_episode_steps", "seed", "overlap",
                                 "heading_check"),
                   prefix="city60_")
@@ -243,6 +244,8 @@ def _check_city60_bench(c: City60BenchConfig) -> None:
     if c.filter not in ("ekf", "particles"):
         raise UsageError("city60_filter", f"must be 'ekf' or 'particles', got {c.filter!r}")
     check_output_dir("city60_out_dir", c.out_dir)
+    if c.localizer_dir:
+        check_output_dir("city60_localizer_dir", c.localizer_dir)
 
 
 def _check_robustness_bench(c: RobustnessConfig) -> None:

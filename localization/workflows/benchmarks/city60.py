@@ -88,6 +88,9 @@ class City60BenchConfig:
     motion_noise: float = field(default=0.1, metadata={"help": "env actuation noise"})
     density: float = field(default=47.0, metadata={
         "help": "street-lane training images per square metre of street (chosen on city 53)"})
+    lane_heading: float = field(default=0.2, metadata={
+        "help": "largest heading offset (rad) of the training images from their lane (the "
+                "maps' heading tube; envs.lanes' default)"})
     features: str = field(default="small_cnn", metadata={
         "help": "small_cnn (the packaged SmallCNN of random views of other cities, whole "
                 "image) or pixel_pca (PixelPCA on the localizer's upper image rows)"})
@@ -152,7 +155,7 @@ def fit_city(args: City60BenchConfig, env: gym.Env) -> tuple[Any, dict[str, floa
                                                 args.n_components),
             measurements=("representation",), quality_steps=0,
             districts=None if args.districts == 1 else (args.districts, args.districts),
-            overlap=args.overlap)
+            overlap=args.overlap, lane_options={"heading": args.lane_heading})
     return loc, seconds, n_train
 
 
@@ -295,7 +298,8 @@ def _result(args: City60BenchConfig, records: dict[int, dict[str, Any]],
                      f"{args.image_size}x{args.image_size} perspective, motion noise "
                      f"{args.motion_noise}, {features_label(args.features, args.n_components)} "
                      f"on {args.density:g} "
-                     f"street-lane images per m^2 of street, "
+                     f"street-lane images per m^2 of street (headings within "
+                     f"{args.lane_heading:g} rad of the lane), "
                      f"{_maps(args)}, {_filter_label(args)}; {args.n_drives} street tour(s) of "
                      f"{args.drive_steps} steps and {args.episodes} agent episode(s) "
                      f"(<= {limit} steps) per city"}

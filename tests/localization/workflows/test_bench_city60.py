@@ -29,6 +29,7 @@ from localization.workflows.tracking import street_train_size
     ("overlap", -1.0, "--city60-overlap"),
     ("filter", "ukf", "--city60-filter"),
     ("heading_check", -0.1, "--city60-heading-check"),
+    ("lane_heading", 0.0, "--city60-lane-heading"),
 ])
 def test_bad_options_are_named(field, value, option):
     args = Args(only="city60", city60=City60BenchConfig(**{field: value}))
