@@ -101,6 +101,15 @@ def test_initial_belief_is_psi_star_not_the_truth(localizer):
     env.close()
 
 
+def test_the_spec_refers_to_the_localizer_without_copying_it(localizer):
+    options = {"heading_check": 0.05}
+    env = BeliefWrapper(make_env(), localizer, filter_options=options)
+    kwargs = env.spec.additional_wrappers[-1].kwargs
+    assert kwargs["localizer"] is localizer  # a 60 m map is a gigabyte: never deep-copied
+    assert kwargs["filter_options"] == options and kwargs["filter_options"] is not options
+    env.close()
+
+
 def test_oracle_and_dead_reckoning():
     Q = np.diag([1e-4, 1e-5, 1e-3])
     oracle = OracleWrapper(make_env())
