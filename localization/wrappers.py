@@ -69,6 +69,14 @@ FILTER_OPTIONS = {
 }
 
 
+class _SharedKwargs(dict):  # type: ignore[type-arg]
+    """Constructor kwargs whose deep copy shares the values: Gymnasium deep-copies a wrapper's
+    spec (and every outer wrapper's copies the inner specs), which would copy the localizer."""
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> _SharedKwargs:
+        return _SharedKwargs(self)
+
+
 def _nees(mean: Array, P: Array, pose: ArrayLike) -> float:
     e = np.asarray(pose, dtype=np.float64) - mean
     e[2] = wrap_angle(e[2])
@@ -206,12 +214,13 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
                  filter_options: dict[str, Any] | None = None,
                  allow_other_city: bool = False) -> None:
         # the spec refers to the localizer, as a scikit-learn meta-estimator does: Gymnasium's
-        # default deep copy duplicated it in every wrapper (1.1 GB a wrapper of a 60 m map)
+        # deep copies duplicated it in every wrapper (1.1 GB a wrapper of a 60 m map)
         gym.utils.RecordConstructorArgs.__init__(
             self, localizer=localizer, measurement=measurement, keep_image=keep_image,
             gate_probability=gate_probability, relocalize_after=relocalize_after,
             inflate_after=inflate_after, filter=filter, filter_options=deepcopy(filter_options),
             allow_other_city=allow_other_city, _disable_deepcopy=True)
+        self._saved_kwargs = _SharedKwargs(self._saved_kwargs)
         check_choice(measurement, "measurement", MEASUREMENTS)
         check_choice(filter, "filter", FILTERS)
         options = check_options(filter_options, f"filter_options of filter {filter!r}",

@@ -107,6 +107,8 @@ def test_the_spec_refers_to_the_localizer_without_copying_it(localizer):
     kwargs = env.spec.additional_wrappers[-1].kwargs
     assert kwargs["localizer"] is localizer  # a 60 m map is a gigabyte: never deep-copied
     assert kwargs["filter_options"] == options and kwargs["filter_options"] is not options
+    outer = gym.wrappers.RecordEpisodeStatistics(env)  # an outer spec deep-copies the inner
+    assert outer.spec.additional_wrappers[-2].kwargs["localizer"] is localizer
     env.close()
 
 
