@@ -167,12 +167,15 @@ def localizer_path(args: City60BenchConfig, city: int) -> Path | None:
 def fit_or_load(args: City60BenchConfig, env: gym.Env, city: int
                 ) -> tuple[Any, dict[str, float], int]:
     """:func:`fit_city`, or the localizer saved at :func:`localizer_path` by an earlier run
-    (checked against the env's city); a new fit is saved there."""
+    (checked against the env's city and image size); a new fit is saved there."""
     path = localizer_path(args, city)
     if path is not None and path.exists():
         t = time.perf_counter()
         loc = load_localizer(path)
         loc.check_city(city_info(env))
+        if tuple(loc.image_size_) != (args.image_size, args.image_size):
+            raise ValueError(f"{path} holds maps of {loc.image_size_} images, not "
+                             f"{args.image_size} px: fitted with other settings")
         return loc, {"load": time.perf_counter() - t}, street_train_size(env, args.density)
     loc, sec, n_train = fit_city(args, env)
     if path is not None:

@@ -102,6 +102,9 @@ def test_a_saved_localizer_is_reused_for_its_city_only(tmp_path: Path, monkeypat
     first = run_city60_bench(City60BenchConfig(quick=True, out_dir=str(tmp_path / "a"),
                                                localizer_dir=str(maps)))
     assert (maps / "localizer_51.npz").is_file()
+    full = City60BenchConfig(localizer_dir=str(maps))  # 64 px: not the quick run's 32 px maps
+    with pytest.raises(ValueError, match="localizer_51.npz holds maps of .*not 64 px"):
+        city60.fit_or_load(full, city60.make_env(full.resolved(), 51), 51)
 
     def refit(args, env):
         raise AssertionError("the saved localizer should have been loaded")
