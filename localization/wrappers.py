@@ -32,7 +32,6 @@ ellipse, the particles and other hypotheses (particle filter), the goal, the pla
 from __future__ import annotations
 
 from collections.abc import Mapping
-from copy import deepcopy
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -214,11 +213,13 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
                  filter_options: dict[str, Any] | None = None,
                  allow_other_city: bool = False) -> None:
         # the spec refers to the localizer, as a scikit-learn meta-estimator does: Gymnasium's
-        # deep copies duplicated it in every wrapper (1.1 GB a wrapper of a 60 m map)
+        # deep copies duplicated it in every wrapper (1.1 GB a wrapper of a 60 m map); the
+        # options dict is copied, its values (a free-space mask of the city, ...) are not
         gym.utils.RecordConstructorArgs.__init__(
             self, localizer=localizer, measurement=measurement, keep_image=keep_image,
             gate_probability=gate_probability, relocalize_after=relocalize_after,
-            inflate_after=inflate_after, filter=filter, filter_options=deepcopy(filter_options),
+            inflate_after=inflate_after, filter=filter, filter_options=dict(filter_options)
+            if isinstance(filter_options, Mapping) else filter_options,
             allow_other_city=allow_other_city, _disable_deepcopy=True)
         self._saved_kwargs = _SharedKwargs(self._saved_kwargs)
         check_choice(measurement, "measurement", MEASUREMENTS)

@@ -102,11 +102,14 @@ def test_initial_belief_is_psi_star_not_the_truth(localizer):
 
 
 def test_the_spec_refers_to_the_localizer_without_copying_it(localizer):
-    options = {"heading_check": 0.05}
-    env = BeliefWrapper(make_env(), localizer, filter_options=options)
+    base = make_env()
+    free = base.unwrapped.city.free_mask  # a bound method: a deep copy would copy the city
+    options = {"heading_check": 0.05, "free_space": free}
+    env = BeliefWrapper(base, localizer, filter_options=options)
     kwargs = env.spec.additional_wrappers[-1].kwargs
     assert kwargs["localizer"] is localizer  # a 60 m map is a gigabyte: never deep-copied
     assert kwargs["filter_options"] == options and kwargs["filter_options"] is not options
+    assert kwargs["filter_options"]["free_space"].__self__ is free.__self__
     outer = gym.wrappers.RecordEpisodeStatistics(env)  # an outer spec deep-copies the inner
     assert outer.spec.additional_wrappers[-2].kwargs["localizer"] is localizer
     env.close()
