@@ -172,7 +172,10 @@ def fit_or_load(args: City60BenchConfig, env: gym.Env, city: int
     if path is not None and path.exists():
         t = time.perf_counter()
         loc = load_localizer(path)
-        loc.check_city(city_info(env))
+        try:
+            loc.check_city(city_info(env))
+        except ValueError as err:
+            raise ValueError(f"{path}: {err}") from None
         if tuple(loc.image_size_) != (args.image_size, args.image_size):
             raise ValueError(f"{path} holds maps of {loc.image_size_} images, not "
                              f"{args.image_size} px: fitted with other settings")

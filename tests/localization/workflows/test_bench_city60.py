@@ -122,4 +122,5 @@ def test_a_saved_localizer_is_reused_for_its_city_only(tmp_path: Path, monkeypat
     other = run_city60_bench(City60BenchConfig(quick=True, cities="52", localizer_dir=str(maps),
                                                out_dir=str(tmp_path / "c")))
     assert other["summary"] == {}
-    assert other["fit_failures"][0].startswith("city 52: ") and "city" in other["fit_failures"][0][9:]
+    assert other["fit_failures"][0].startswith(f"city 52: {maps / 'localizer_52.npz'}: ")
+    assert "fitted on" in other["fit_failures"][0]
