@@ -342,12 +342,21 @@ class DistrictLocalizer(DistrictNoiseMixin):
     def initial_belief(self, w: ArrayLike) -> tuple[Array, Array]:
         """Belief from one image: the chosen district's psi*(w) and initial covariance (the
         mean is NaN when no district's maps hold)."""
+        x0, P0, _ = self.initial_candidate(w)
+        return x0, P0
+
+    def initial_candidate(self, w: ArrayLike) -> tuple[Array, Array, float]:
+        """:meth:`initial_belief` (mean (3,), covariance (3, 3)) and how familiar the image
+        is: its relative novelty under the chosen district (its novelty over the median of
+        that district's training images; inf when no district's maps hold). The belief
+        filter's ``familiar_novelty`` restarts only from familiar images
+        (:mod:`~localization.filtering.familiar_start`)."""
         self.check_ready()
         found = self.candidates(self._check_w(w))
         if not found:
-            return np.full(3, np.nan), np.array(self._poses_cov)
-        _, k, x = found[0]
-        return x, body_to_world(self.districts_[k].initial_noise_, float(x[2]))
+            return np.full(3, np.nan), np.array(self._poses_cov), float("inf")
+        u, k, x = found[0]
+        return x, body_to_world(self.districts_[k].initial_noise_, float(x[2])), float(u)
 
     def prior(self) -> tuple[Array, Array]:
         """Mean and covariance of all training poses (a know-nothing belief)."""

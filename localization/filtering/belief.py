@@ -36,6 +36,12 @@ from numpy.typing import ArrayLike
 
 from localization._validation import check_bool, check_choice, check_int, check_real
 from localization.filtering._belief_recovery import RecoveryMixin
+from localization.filtering._belief_status import (  # noqa: F401 (LOST_*: the belief's names)
+    LOST_AFTER_MISSES,
+    LOST_HEADING_STD,
+    LOST_POSITION_STD,
+    StatusMixin,
+)
 from localization.filtering.divergence import monitor_for
 from localization.filtering.ekf import (
     OutOfDomainError,
@@ -44,6 +50,7 @@ from localization.filtering.ekf import (
     check_gate_probability,
     check_motion_model,
 )
+from localization.filtering.familiar_start import FamiliarStartMixin, check_familiar_novelty
 from localization.filtering.heading_check import check_heading_check, turns_away
 from localization.filtering.localizer_protocol import Localizer, check_localizer
 from localization.filtering.map_contact import (
@@ -61,23 +68,16 @@ from localization.filtering.map_contact import (
 )
 from localization.filtering.particle_start import DEFAULT_P0
 from localization.filtering.recorded_run import run_recorded
-from localization.filtering.restart_trial import CONFIRM_STEPS, RestartTrial, ViewOdometer
+from localization.filtering.restart_trial import RestartTrial, ViewOdometer
 from localization.geometry import Array
 
 STATUSES = ("initial", "accepted", "gated", "out_of_domain", "relocalized", "reverted")
 NOISE_MODELS = ("global", "heteroscedastic")
 RESET_MODES = ("image", "global")
-LOST_AFTER_MISSES = 5  # steps in a row without an accepted measurement: "doubtful" or "lost"
-#: ... "lost" when P is also this wide (position std in m along its widest axis, heading std in
-#: rad); else "doubtful": dead reckoning through unfamiliar views at a corner is not being lost
-LOST_POSITION_STD = 0.5
 MAX_HEADING_STD = 0.5  # rad: heading inflation stops there
-#: wider than the inflation: rejected images alone are "doubtful" (0.4 rad stopped a belief
-#: 0.1 m right to turn in place into views off the map; tuning cities 13-16, method §13)
-LOST_HEADING_STD = 0.6
 
 
-class BeliefFilter(RecoveryMixin):
+class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
     """EKF pose belief fed with image features.
 
     Parameters
@@ -127,6 +127,12 @@ class BeliefFilter(RecoveryMixin):
         the same map (:mod:`~localization.filtering.heading_check`): an image without psi*
         is "out_of_domain", an update turning the heading more than this (rad) away from
         psi*'s is undone ("gated"). None: off.
+    familiar_novelty : float or None
+        Restarts rest on familiar images (:mod:`~localization.filtering.familiar_start`;
+        a localizer with ``initial_candidate``): an image whose relative novelty exceeds
+        this is unfamiliar; a start from the first image is then unverified until a familiar
+        image's psi* agrees with the belief (else the belief restarts there), and every other
+        restart from an image waits for a familiar one. None: off (every in-domain image).
 
     Attributes
     ----------
@@ -147,7 +153,8 @@ class BeliefFilter(RecoveryMixin):
                  detect_divergence: bool | dict[str, Any] = False,
                  noise: str = "global", free_space: FreeSpace | None = None,
                  contact_motion: str = "blocked", project_contacts: bool = True,
-                 heading_check: float | None = None) -> None:
+                 heading_check: float | None = None,
+                 familiar_novelty: float | None = None) -> None:
         check_localizer(localizer)
         check_choice(noise, "noise", NOISE_MODELS)
         self.contact_motion = check_choice(contact_motion, "contact_motion", CONTACT_MOTIONS)
@@ -189,6 +196,9 @@ class BeliefFilter(RecoveryMixin):
         self._repeat_view = False  # this step's accepted image was a repeat of the trial's
         self.free_space = check_free_space(free_space)
         self.heading_check = check_heading_check(heading_check, measurement)
+        self.familiar_novelty = check_familiar_novelty(familiar_novelty, localizer)
+        self._unverified = False  # a start from an unfamiliar image, not yet checked
+        self._resetting = False  # in reset(): the first image may be unfamiliar
         self.project_contacts = check_bool(project_contacts, "project_contacts")
         self._bumped = 0  # steps left "lost" after a contact that contradicts the belief
         self._since_contact = REPEAT_CONTACT_STEPS + 1  # steps since the last city contact
@@ -246,11 +256,13 @@ class BeliefFilter(RecoveryMixin):
     def _from_image(self, w: Array) -> bool:
         """Start at psi*(w) with its noise, unconfirmed: "relocalizing" and on trial with
         nothing to come back to (:meth:`_on_trial` starts again at a later image's psi* unless
-        this one is confirmed). False (nothing changed) when psi*(w) is out of domain."""
-        x0, P0 = self.localizer.initial_belief(w)
-        if not np.all(np.isfinite(x0)):
+        this one is confirmed). False (nothing changed) when psi*(w) is out of domain, or with
+        ``familiar_novelty`` when the image is unfamiliar (but for the first: unverified)."""
+        x0, P0, familiar = self._image_start(w)
+        if not np.all(np.isfinite(x0)) or not (familiar or self._resetting):
             return False
         self._start(x0, P0)
+        self._unverified = not familiar
         self._put_on_trial(None, 0)
         self.belief_status = "relocalizing"
         return True
@@ -275,12 +287,12 @@ class BeliefFilter(RecoveryMixin):
         if mode == "global" and x0 is not None:
             raise ValueError("mode='global' starts from an unknown pose: do not pass x0")
         self.last_update, self._trial, self._refused = None, None, None
-        self.belief_status = "tracking"
+        self.belief_status, self._unverified = "tracking", False
         self._since_contact = REPEAT_CONTACT_STEPS + 1  # a new episode: no bump before
         if x0 is not None:
             self._start(x0, P0 if P0 is not None else DEFAULT_P0.copy())
             return "initial"
-        if mode == "image" and self._from_image(np.asarray(w, dtype=np.float64)):
+        if mode == "image" and self._first_image(np.asarray(w, dtype=np.float64)):
             return "initial"
         mean, cov = self.localizer.prior()
         self._start(mean, cov)
@@ -354,6 +366,8 @@ class BeliefFilter(RecoveryMixin):
             self._bumped = CONTACT_LOST_STEPS
         self._since_contact = 0 if "city" in kinds else self._since_contact + 1
         self._update_status(status)
+        if self._unverified and status != "relocalized":
+            status = self._verify_start(w, status)
         return nis, status
 
     def _project(self, bearing: float) -> None:
@@ -377,42 +391,6 @@ class BeliefFilter(RecoveryMixin):
             assert self.ekf is not None
             return blocked_motion(self.motion_model, self.ekf.x, u_k, "traffic" in kinds)
         return u_k, None
-
-    def _update_status(self, status: str) -> None:
-        """"relocalizing" until ``CONFIRM_STEPS`` accepted measurements; otherwise "lost"
-        while the monitor says so, or after ``LOST_AFTER_MISSES`` steps in a row without an
-        accepted measurement once P is wider than ``LOST_POSITION_STD`` /
-        ``LOST_HEADING_STD`` (wider than the heading inflation makes it), or after a
-        contact that contradicts it (a restart on trial too, "relocalizing" again after it:
-        on tuning city 13, seed 3000010 kidnapped, a restart 2.6 m off whose images all fell
-        off the maps stayed "relocalizing" for 270 steps and drove into a kiosk 30 times);
-        "doubtful" after those misses while P is still narrow (coasting on F through views
-        off the maps) or on a step whose image alone contradicts the belief (the monitor's
-        ``doubt_nis``); else "tracking"."""
-        if status == "relocalized":
-            return
-        if status == "reverted":
-            self.belief_status = "doubtful"
-            return
-        on_trial = self.belief_status == "relocalizing" or (
-            self.belief_status == "lost" and self._trial is not None)  # lost by a contact
-        if on_trial and not self._bumped:
-            self.belief_status = "relocalizing"
-            self._confirm += status == "accepted" and not (self._forced or self._repeat_view)
-            if self._confirm >= CONFIRM_STEPS:
-                self.belief_status = "tracking"
-            return
-        missing = self.misses >= LOST_AFTER_MISSES
-        lost = self._lost_now or (missing and self._wide()) or self._bumped > 0
-        self.belief_status = "lost" if lost else "doubtful" if (
-            self._doubtful_now or missing) else "tracking"
-
-    def _wide(self) -> bool:
-        """P too wide to steer on (:data:`LOST_POSITION_STD`, :data:`LOST_HEADING_STD`)."""
-        assert self.ekf is not None
-        P = self.ekf.P
-        return bool(np.linalg.eigvalsh(P[:2, :2])[-1] > LOST_POSITION_STD ** 2
-                    or P[2, 2] > LOST_HEADING_STD ** 2)
 
     def _update(self, w: Array) -> tuple[float, str]:
         assert self.ekf is not None

@@ -124,6 +124,25 @@ def test_districts_localize_single_images_better_than_one_map(split, one):
     assert errors[0] < 0.75 * errors[1]
 
 
+def test_initial_candidate_rates_the_image_of_the_initial_belief(split, drive):
+    """``initial_candidate`` is ``initial_belief`` and the chosen district's relative novelty;
+    an image unlike the maps' (scaled features) is rated more novel; none: inf."""
+    W = split.transform(drive[0][:20])
+    for w in W[::5]:
+        x0, P0, u = split.initial_candidate(w)
+        b0, B0 = split.initial_belief(w)
+        np.testing.assert_array_equal(x0, b0)
+        np.testing.assert_array_equal(P0, B0)
+        assert u == split.candidates(w)[0][0] and 0.0 < u < 20.0
+    us = [split.initial_candidate(w)[2] for w in W]
+    assert np.median(us) < 4.0  # the maps' own street (the training images' median is 1)
+    odd = np.array([split.initial_candidate(w)[2] for w in 1.5 * W])
+    assert np.all(odd[np.isfinite(odd)] > np.array(us)[np.isfinite(odd)])
+    split_none = np.full(W.shape[1], 1e6)
+    x0, _, u = split.initial_candidate(split_none)
+    assert np.all(np.isnan(x0)) and u == float("inf")
+
+
 def test_bad_inputs_are_named(split, train):
     with pytest.raises(ValueError, match="w must be"):
         split.initial_belief(np.zeros(3))
