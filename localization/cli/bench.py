@@ -233,7 +233,7 @@ def _check_city60_bench(c: City60BenchConfig) -> None:
                                "n_drives", "drive_steps", "episodes", "districts",
                                "lane_heading"),
                   non_negative=("motion_noise", "max_episode_steps", "seed", "overlap",
-                                "heading_check"),
+                                "heading_check", "familiar_novelty"),
                   prefix="city60_")
     try:
         check_city_layout(c.city_size)

@@ -106,6 +106,11 @@ class City60BenchConfig:
         "help": "the EKF undoes a representation update that turns its heading more than this "
                 "(rad) away from the image's own psi* (BeliefFilter heading_check; chosen on "
                 "city 53); 0: off"})
+    familiar_novelty: float = field(default=3.0, metadata={
+        "help": "the EKF restarts only from images whose relative novelty is at most this, "
+                "and checks a start from a more novel first image against the first familiar "
+                "one (BeliefFilter familiar_novelty; chosen on city 53; district maps only); "
+                "0: off"})
     n_drive: int = field(default=1500, metadata={"help": "steps of each noise-calibration drive"})
     n_drives: int = field(default=3, metadata={"help": "street tours per city"})
     drive_steps: int = field(default=1000, metadata={"help": "steps of each street tour"})
@@ -210,11 +215,21 @@ def tours(args: City60BenchConfig, env: gym.Env, loc: Any, base: int) -> list[di
 
 def _belief(args: City60BenchConfig) -> dict[str, Any]:
     """BeliefWrapper options of ``args.filter`` (the particles spread over the city's free
-    streets by default; the EKF with ``heading_check`` unless it is 0)."""
+    streets by default; the EKF with ``heading_check`` and, on district maps,
+    ``familiar_novelty`` unless they are 0)."""
     if args.filter != "ekf":
         return {"filter": "particles"}
-    return {"filter_options": {"heading_check": args.heading_check}} if args.heading_check \
-        else {}
+    options: dict[str, float] = {}
+    if args.heading_check:
+        options["heading_check"] = args.heading_check
+    if _familiar(args):
+        options["familiar_novelty"] = args.familiar_novelty
+    return {"filter_options": options} if options else {}
+
+
+def _familiar(args: City60BenchConfig) -> bool:
+    """Whether the EKF's restarts wait for familiar images (district maps rate them)."""
+    return args.filter == "ekf" and args.familiar_novelty > 0 and args.districts > 1
 
 
 def agent_runs(args: City60BenchConfig, loc: Any, city: int, base: int
@@ -312,9 +327,12 @@ def _result(args: City60BenchConfig, records: dict[int, dict[str, Any]],
 
 
 def _filter_label(args: City60BenchConfig) -> str:
+    parts = [f"{args.filter} belief"]
     if args.filter == "ekf" and args.heading_check:
-        return f"ekf belief, heading checked against psi* ({args.heading_check:g} rad)"
-    return f"{args.filter} belief"
+        parts.append(f"heading checked against psi* ({args.heading_check:g} rad)")
+    if _familiar(args):
+        parts.append(f"restarts from familiar images (novelty <= {args.familiar_novelty:g})")
+    return ", ".join(parts)
 
 
 def _maps(args: City60BenchConfig) -> str:

@@ -29,6 +29,7 @@ from localization.workflows.tracking import street_train_size
     ("overlap", -1.0, "--city60-overlap"),
     ("filter", "ukf", "--city60-filter"),
     ("heading_check", -0.1, "--city60-heading-check"),
+    ("familiar_novelty", -1.0, "--city60-familiar-novelty"),
     ("lane_heading", 0.0, "--city60-lane-heading"),
 ])
 def test_bad_options_are_named(field, value, option):
@@ -77,6 +78,7 @@ def test_quick_run_end_to_end(tmp_path: Path, belief: str):
     assert s["single_image"]["images"] == 20 and s["single_image"]["median"] >= 0
     assert "| 51 | 2000 | " in table and "<= 0.20" in table and "districts" in table
     assert "60 m" in saved["setup"] and f"{belief} belief" in saved["setup"]
+    assert ("restarts from familiar images" in saved["setup"]) == (belief == "ekf")
 
 
 def test_a_failed_fit_is_reported_and_the_run_goes_on(tmp_path: Path, monkeypatch):
