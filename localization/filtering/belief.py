@@ -132,7 +132,7 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
         a localizer with ``initial_candidate``): an image whose relative novelty exceeds
         this is unfamiliar; a start from the first image is then unverified until a familiar
         image's psi* agrees with the belief (else the belief restarts there), and every other
-        restart from an image waits for a familiar one. None: off (every in-domain image).
+        restart from an image needs a familiar one. None: off (every in-domain image).
 
     Attributes
     ----------

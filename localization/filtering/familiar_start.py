@@ -19,8 +19,10 @@ With ``BeliefFilter(familiar_novelty=u_max)`` an image is *familiar* when ``u <=
       d^2 = (x0 - x)^T (P + P0)^-1 (x0 - x) <= chi2_3(gate_probability)
 
   the start is verified; otherwise the belief restarts at ``x0`` ("relocalized", on trial).
-- Every other restart from an image (after ``relocalize_after`` misses; a failed trial with
-  nothing to come back to) waits for a familiar image.
+- Every other restart from an image needs a familiar one: after ``relocalize_after`` misses
+  the belief waits for one (each further miss tries again); a trial that failed with nothing
+  to come back to restarts at the current image only if it is familiar, else the belief stays
+  where the trial left it (and restarts after ``relocalize_after`` misses).
 
 On city 53 a first image 8.3 m off (``u = 13``), whose look-alike the next 34 images agreed
 with, was replaced at the fifth image; the later restarts of a belief coasting through views

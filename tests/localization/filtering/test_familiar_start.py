@@ -111,3 +111,19 @@ def test_bad_familiar_novelty_is_named():
     with pytest.raises(TypeError, match="familiar_novelty.*_UnratedMaps"):
         BeliefFilter(_UnratedMaps(), UnicycleModel(0.1), measurement="pose",
                      familiar_novelty=3.0)
+
+
+def test_a_failed_start_restarts_only_at_a_familiar_image():
+    # a start whose next TRIAL_STEPS views are all gated fails its trial; without the option
+    # the belief restarts at the current image, with it only if that image is familiar
+    from localization.filtering.restart_trial import TRIAL_STEPS
+
+    u = np.array([0.5, 0.0])  # 0.05 m a step: every view counts
+    for option, novelty, expected in ((None, 9.0, "relocalized"), (3.0, 9.0, "gated"),
+                                      (3.0, 2.0, "relocalized")):
+        belief = _belief(familiar_novelty=option)
+        belief.reset(_image(0.0, 0.0, 1.0))
+        statuses = [belief.step(u, _image(5.0, 0.0, novelty))[1] for _ in range(TRIAL_STEPS)]
+        assert statuses[:-1] == ["gated"] * (TRIAL_STEPS - 1)
+        assert statuses[-1] == expected
+        assert (belief.x[0] > 4.0) == (expected == "relocalized")
