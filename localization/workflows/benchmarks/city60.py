@@ -112,7 +112,9 @@ class City60BenchConfig:
                 "one (BeliefFilter familiar_novelty; chosen on city 53; district maps only); "
                 "0: off"})
     n_drive: int = field(default=1500, metadata={"help": "steps of each noise-calibration drive"})
-    n_drives: int = field(default=3, metadata={"help": "street tours per city"})
+    n_drives: int = field(default=6, metadata={
+        "help": "street tours per city (6: with 3, held-out city 51 showed one lost tour of "
+                "three where six showed three of six, stop 61)"})
     drive_steps: int = field(default=1000, metadata={"help": "steps of each street tour"})
     episodes: int = field(default=10, metadata={"help": "scripted-agent episodes per city"})
     n_single: int = field(default=1000, metadata={
