@@ -50,7 +50,11 @@ from localization.filtering.ekf import (
     check_gate_probability,
     check_motion_model,
 )
-from localization.filtering.familiar_start import FamiliarStartMixin, check_familiar_novelty
+from localization.filtering.familiar_start import (
+    FamiliarStartMixin,
+    ImageStart,
+    check_familiar_novelty,
+)
 from localization.filtering.heading_check import check_heading_check, turns_away
 from localization.filtering.localizer_protocol import Localizer, check_localizer
 from localization.filtering.map_contact import (
@@ -198,7 +202,6 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
         self.heading_check = check_heading_check(heading_check, measurement)
         self.familiar_novelty = check_familiar_novelty(familiar_novelty, localizer)
         self._unverified = False  # a start from an unfamiliar image, not yet checked
-        self._resetting = False  # in reset(): the first image may be unfamiliar
         self.project_contacts = check_bool(project_contacts, "project_contacts")
         self._bumped = 0  # steps left "lost" after a contact that contradicts the belief
         self._since_contact = REPEAT_CONTACT_STEPS + 1  # steps since the last city contact
@@ -253,13 +256,15 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
         if self.monitor is not None:
             self.monitor.clear()
 
-    def _from_image(self, w: Array) -> bool:
+    def _from_image(self, w: Array, first: bool = False,
+                     start: ImageStart | None = None) -> bool:
         """Start at psi*(w) with its noise, unconfirmed: "relocalizing" and on trial with
         nothing to come back to (:meth:`_on_trial` starts again at a later image's psi* unless
         this one is confirmed). False (nothing changed) when psi*(w) is out of domain, or with
-        ``familiar_novelty`` when the image is unfamiliar (but for the first: unverified)."""
-        x0, P0, familiar = self._image_start(w)
-        if not np.all(np.isfinite(x0)) or not (familiar or self._resetting):
+        ``familiar_novelty`` when the image is unfamiliar (but the ``first``: unverified).
+        ``start``: :meth:`_image_start` of ``w`` when already known."""
+        x0, P0, familiar = self._image_start(w) if start is None else start
+        if not np.all(np.isfinite(x0)) or not (familiar or first):
             return False
         self._start(x0, P0)
         self._unverified = not familiar
@@ -292,7 +297,7 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
         if x0 is not None:
             self._start(x0, P0 if P0 is not None else DEFAULT_P0.copy())
             return "initial"
-        if mode == "image" and self._first_image(np.asarray(w, dtype=np.float64)):
+        if mode == "image" and self._from_image(np.asarray(w, dtype=np.float64), first=True):
             return "initial"
         mean, cov = self.localizer.prior()
         self._start(mean, cov)

@@ -34,15 +34,19 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.stats import chi2
 
 from localization._validation import check_real
+from localization.filtering.ekf import _gate_threshold
 from localization.geometry import Array, wrap_angle
 
-__all__ = ["AGREE_PROBABILITY", "FamiliarStartMixin", "check_familiar_novelty", "start_agrees"]
+__all__ = ["AGREE_PROBABILITY", "FamiliarStartMixin", "ImageStart", "check_familiar_novelty",
+           "start_agrees"]
 
 #: the agreement gate's probability when the belief filter has no NIS gate
 AGREE_PROBABILITY = 0.997
+
+#: psi*(w) (3,), its covariance (3, 3) and whether the image is familiar
+ImageStart = tuple[Array, Array, bool]
 
 
 def check_familiar_novelty(familiar_novelty: object, localizer: Any) -> float | None:
@@ -50,9 +54,7 @@ def check_familiar_novelty(familiar_novelty: object, localizer: Any) -> float | 
     images (``initial_candidate``, e.g. a DistrictLocalizer)."""
     if familiar_novelty is None:
         return None
-    value = check_real(familiar_novelty, "familiar_novelty", low=0.0)
-    if value <= 0.0:
-        raise ValueError(f"familiar_novelty must be > 0 (a relative novelty), got {value!r}")
+    value = check_real(familiar_novelty, "familiar_novelty", low=0.0, low_open=True)
     if not callable(getattr(localizer, "initial_candidate", None)):
         raise TypeError("familiar_novelty needs a localizer that rates how familiar an image "
                          "is (initial_candidate, e.g. a DistrictLocalizer); "
@@ -68,14 +70,14 @@ def start_agrees(x: Array, P: Array, x0: Array, P0: Array,
     d = np.asarray(x0, dtype=np.float64) - np.asarray(x, dtype=np.float64)
     d[2] = wrap_angle(d[2])
     d2 = float(d @ np.linalg.solve(np.asarray(P) + np.asarray(P0), d))
-    return d2 <= float(chi2.ppf(gate_probability or AGREE_PROBABILITY, 3))
+    return d2 <= _gate_threshold(gate_probability or AGREE_PROBABILITY, 3)
 
 
 class FamiliarStartMixin:
     """The belief filter's starts from images with ``familiar_novelty`` (module docstring).
 
     The host class provides ``localizer``, ``ekf``, ``gate_probability``, ``belief_status``,
-    ``familiar_novelty``, ``_unverified``, ``_resetting`` and ``_from_image``."""
+    ``familiar_novelty``, ``_unverified`` and ``_from_image(w, first, start)``."""
 
     localizer: Any
     ekf: Any
@@ -83,10 +85,9 @@ class FamiliarStartMixin:
     belief_status: str
     familiar_novelty: float | None
     _unverified: bool
-    _resetting: bool
     _from_image: Any
 
-    def _image_start(self, w: Array) -> tuple[Array, Array, bool]:
+    def _image_start(self, w: Array) -> ImageStart:
         """psi*(w), its covariance and whether the image is familiar (always without
         ``familiar_novelty``)."""
         if self.familiar_novelty is None:
@@ -95,24 +96,16 @@ class FamiliarStartMixin:
         x0, P0, u = self.localizer.initial_candidate(w)
         return x0, P0, bool(u <= self.familiar_novelty)
 
-    def _first_image(self, w: Array) -> bool:
-        """:meth:`_from_image` for the first image, which may be unfamiliar."""
-        self._resetting = True
-        try:
-            return bool(self._from_image(w))
-        finally:
-            self._resetting = False
-
     def _verify_start(self, w: Array, status: str) -> str:
         """An unverified start meets image ``w``: if it is familiar, its psi* verifies the
         belief (inside the gate) or restarts it there ("relocalized")."""
-        x0, P0, familiar = self._image_start(w)
+        start = self._image_start(w)
+        x0, P0, familiar = start
         if not (familiar and np.all(np.isfinite(x0))):
             return status
         if start_agrees(self.ekf.x, self.ekf.P, x0, P0, self.gate_probability):
             self._unverified = False
             return status
-        if self._from_image(w):
-            self.belief_status = "relocalizing"
-            return "relocalized"
-        return status
+        self._from_image(w, start=start)
+        self.belief_status = "relocalizing"
+        return "relocalized"
