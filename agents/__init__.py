@@ -11,6 +11,7 @@ from localization._lazy import lazy_names
 _LAZY = {
     "StreetPlanner": "planner", "PlannedPath": "planner", "path_length": "planner",
     "ScriptedAgent": "scripted", "Navigator": "scripted", "pure_pursuit": "scripted",
+    "Recovery": "recovery",
     "check_belief_observation": "scripted",
     "NavigationObservation": "observations", "NavigationFeatures": "observations",
     "StreetProgressReward": "rewards",
@@ -28,6 +29,7 @@ __all__ = [
     "Navigator",
     "PPOAgent",
     "PlannedPath",
+    "Recovery",
     "ScriptedAgent",
     "StreetPlanner",
     "StreetProgressReward",

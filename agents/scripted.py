@@ -22,27 +22,17 @@ from agents.planner import (
     clamp_to_city,
     round_corners,
 )
+from agents.recovery import LOOK_TOLERANCE, STOP_STATUSES, Recovery, street_axis
 from envs.driving import bearing, pursuit_turn_rate
-from localization._validation import check_array, check_int, check_real
-from localization.geometry import Array, wrap_angle
+from localization._validation import check_array, check_real
+from localization.geometry import Array
 
-__all__ = ["BELIEF_KEYS", "PLANS", "SLOW_STATUSES", "STOP_STATUSES", "Navigator", "ScriptedAgent",
-           "check_belief_observation", "pure_pursuit"]
+__all__ = ["BELIEF_KEYS", "LOOK_TOLERANCE", "PLANS", "SLOW_STATUSES", "STOP_STATUSES", "Navigator",
+           "ScriptedAgent", "check_belief_observation", "pure_pursuit", "street_axis"]
 
 BELIEF_KEYS = ("pose_mean", "pose_cov", "goal")
-#: ``info["belief_status"]`` values on which the agent does not steer on the belief
-STOP_STATUSES = ("lost",)
 SLOW_STATUSES = ("relocalizing", "ambiguous", "doubtful")
 OBS_NAMES = ("obs['pose_mean']", "obs['goal']")  # how Navigator.update names them in errors
-#: While lost the agent turns to the street axes (multiples of pi/2: the city's streets run
-#: along x and y), the headings a lane-trained map has views at; within this many rad of one
-#: it stops turning and looks.
-LOOK_TOLERANCE = 0.05
-
-
-def street_axis(yaw: float) -> float:
-    """The street direction (a multiple of pi/2) nearest to heading ``yaw`` (rad)."""
-    return float(np.round(yaw / (np.pi / 2)) * (np.pi / 2))
 
 
 def check_belief_observation(obs: Any) -> tuple[Array, Array, Array]:
@@ -166,33 +156,25 @@ class ScriptedAgent:
         turns on the spot (:class:`Navigator`).
     back_off_steps : int — steps it reverses after a contact (0: never).
     back_off_speed : float — reversing speed (m/s).
+    look_rate : float — turn rate (rad/s) while it looks around, lost.
     look_dwell : int — steps it looks along each street axis while lost.
 
     Notes
     -----
     ``act(obs, info)`` takes one belief observation (keys ``pose_mean``, ``pose_cov``,
     ``goal``) and, optionally, the step's ``info``, and returns the action U = [v, w]
-    (float32, inside the env's action Box). When ``info["belief_status"]`` is "lost" the
-    agent does not steer on the belief: it stops, turns in place at ``look_rate`` to the
-    street axis nearest its believed heading (the streets run along x and y: the views a
-    lane-trained map knows), looks along it for ``look_dwell`` steps, then turns a quarter
-    turn on to the next axis, and so on (turning at one rate through the views off the map
-    lost beliefs that were right: a lane map rejects them all until the 50-step restart
-    jumps to a look-alike); "relocalizing", "doubtful" or "ambiguous" scale the speed by
+    (float32, inside the env's action Box). Before it steers, its
+    :class:`~agents.recovery.Recovery` (``self.recovery``) may act instead: after a contact
+    (``info["collision"]``, a bump sensor) it reverses ``back_off_steps`` steps at
+    ``back_off_speed``; while ``info["belief_status"]`` is "lost" it does not steer on the
+    belief but stops and looks along the street axes (``look_rate``, ``look_dwell``).
+    "relocalizing", "doubtful" or "ambiguous" scale the speed by
     ``slow_factor`` (0.25: on tuning cities 13-14, robots pushed off their lane on the
     particle belief touched a wall for 0.50 steps per episode against 0.83 at 0.5, 100
     episodes, at 0.9 s more per goal; at 0 the agent stalled, 0.95 of the goals).
-    The status comes through ``info``, not the observation, so every pose source keeps the
-    same observation space (and trained policies keep working). So does its bumper:
-    ``info["collision"]`` (contact with a building, the boundary or a vehicle, what a
-    robot's bump sensor reports) makes it reverse ``back_off_steps`` steps at
-    ``back_off_speed`` before it steers again (forward instead if the contact lasts through
-    two steps of reversing: the obstacle is behind; reversing on held one kidnapped robot
-    against a wall for 239 steps): a plan on a wrong belief led into the wall,
-    and pressing on only adds contact (on tuning cities 13-14 backing off 5 steps cut the
-    contact steps per episode on the EKF belief from 2.6 to 0.46 nominal and 15.9 to 2.2
-    kidnapped, success unchanged). Call :meth:`reset` between episodes (a new goal also
-    starts a new plan).
+    The status and the bumper come through ``info``, not the observation, so every pose
+    source keeps the same observation space (and trained policies keep working).
+    Call :meth:`reset` between episodes (a new goal also starts a new plan).
     """
 
     def __init__(self, city: Any, lookahead: float = 0.6, speed: float = 0.9, w_max: float = 1.0,
@@ -201,14 +183,7 @@ class ScriptedAgent:
                  back_off_steps: int = 5, back_off_speed: float = 0.3,
                  look_dwell: int = 10) -> None:
         self.navigator = Navigator(city, replan_distance, plan)
-        self.back_off_steps = check_int(back_off_steps, "back_off_steps", low=0)
-        self.back_off_speed = check_real(back_off_speed, "back_off_speed", low=0.0, high=1.0)
-        self._backing = 0  # steps of backing off left
-        self._back_sign = -1.0  # -1 reversing, +1 forward (the contact came while reversing)
-        self.look_dwell = check_int(look_dwell, "look_dwell", low=0)
-        self._look_axis: float | None = None  # while lost: the street axis it turns to
-        self._look_left = 0  # steps it still looks along that axis
-        self.look_rate = check_real(look_rate, "look_rate", low=0.0)
+        self.recovery = Recovery(w_max, back_off_steps, back_off_speed, look_rate, look_dwell)
         self.slow_factor = check_real(slow_factor, "slow_factor", low=0.0, high=1.0)
         self.lookahead, self.speed, self.w_max, self.turn_in_place = (
             check_real(v, name, low=0.0, low_open=True) for name, v in (
@@ -218,8 +193,7 @@ class ScriptedAgent:
     def reset(self) -> None:
         """Forget the current plan (and stop reversing)."""
         self.navigator.reset()
-        self._backing, self._back_sign = 0, -1.0
-        self._look_axis = None
+        self.recovery.reset()
 
     @property
     def path(self) -> Array | None:
@@ -231,42 +205,12 @@ class ScriptedAgent:
             ) -> NDArray[np.float32]:
         """The action U = [v, w] for one belief observation (and the step's ``info``)."""
         mean, _, goal = check_belief_observation(obs)
-        status = None if info is None else info.get("belief_status")
-        if info is not None and info.get("collision", False):
-            self._bump()
-        if self._backing > 0:
-            self._backing -= 1
-            return np.array([self._back_sign * self.back_off_speed, 0.0], dtype=np.float32)
-        if status in STOP_STATUSES:
-            return self._look_around(float(mean[2]))
-        self._look_axis = None
+        u_recover = self.recovery.act(float(mean[2]), info)
+        if u_recover is not None:
+            return u_recover
         path = self.navigator.update(mean, goal, OBS_NAMES)
         u = pure_pursuit(mean, path.ahead(self.lookahead), path.remaining(), self.speed,
                          self.w_max, self.turn_in_place)
-        if status in SLOW_STATUSES:
+        if info is not None and info.get("belief_status") in SLOW_STATUSES:
             u[0] *= self.slow_factor
         return u.astype(np.float32)
-
-    def _bump(self) -> None:
-        """A contact: back off ``back_off_steps`` steps, reversing; forward instead when the
-        contact lasts past the first two steps of reversing (the obstacle is behind: reversing
-        on pressed into it)."""
-        if self._backing == 0:
-            self._back_sign, self._backing = -1.0, self.back_off_steps
-        elif self._back_sign < 0 and self._backing < self.back_off_steps - 1:
-            self._back_sign, self._backing = 1.0, self.back_off_steps
-
-    def _look_around(self, yaw: float) -> NDArray[np.float32]:
-        """Lost: turn on the spot to the nearest street axis of the believed heading ``yaw``,
-        look along it for ``look_dwell`` steps, then turn on a quarter turn to the next."""
-        if self._look_axis is None:
-            self._look_axis, self._look_left = street_axis(yaw), self.look_dwell
-        error = float(wrap_angle(self._look_axis - yaw))
-        if abs(error) <= LOOK_TOLERANCE:
-            if self._look_left > 0:
-                self._look_left -= 1
-                return np.zeros(2, dtype=np.float32)
-            self._look_axis, self._look_left = self._look_axis + np.pi / 2, self.look_dwell
-            error = float(wrap_angle(self._look_axis - yaw))
-        return np.array([0.0, np.copysign(min(self.look_rate, self.w_max), error)],
-                        dtype=np.float32)

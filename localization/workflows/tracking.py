@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
+from agents.recovery import Recovery
 from envs.datasets import (
     PurePursuit,
     collect_dataset,
@@ -292,7 +293,7 @@ def track_route(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
                 steps: int, start: int = 0, seed: int = 0, keep_images: bool = False,
                 allow_other_city: bool = False,
                 recorder: Callable[[gym.Env], gym.Env] | None = None,
-                **wrapper_options: Any) -> TrackResult:
+                recover: bool = False, **wrapper_options: Any) -> TrackResult:
     """Drive ``steps`` steps along the city's route on the belief mean.
 
     The robot starts on the route's path point ``start`` (``PurePursuit.path``), heading
@@ -300,18 +301,20 @@ def track_route(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
     ``wrapper_options`` go to :class:`BeliefWrapper`; ``recorder`` wraps it for the drive
     (e.g. a :class:`~localization.workflows.rerun_log.RerunRecorder`). A localizer fitted on
     another city raises :class:`~localization.localizer.OtherCityError` unless
-    ``allow_other_city``.
+    ``allow_other_city``. With ``recover`` a :class:`~agents.recovery.Recovery` acts before
+    the pilot: it backs off after a contact and, while ``info["belief_status"]`` is "lost",
+    stops and looks along the street axes instead of steering on the belief.
     """
     base = env.unwrapped
     pilot = PurePursuit(base.city.route(), w_max=base.W_MAX)
     return _track(env, localizer, measurement, pilot, pilot.start_pose(start), steps, seed,
-                  keep_images, allow_other_city, wrapper_options, recorder)
+                  keep_images, allow_other_city, wrapper_options, recorder, recover)
 
 
 def track_streets(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
                   steps: int, seed: int = 0, keep_images: bool = False,
                   speed: float = 0.6, allow_other_city: bool = False,
-                  **wrapper_options: Any) -> TrackResult:
+                  recover: bool = False, **wrapper_options: Any) -> TrackResult:
     """Drive ``steps`` steps along a random tour of the streets (``envs.lanes.street_tour``
     drawn from ``seed``) on the belief mean, from the tour's first intersection (other
     arguments as :func:`track_route`)."""
@@ -320,20 +323,20 @@ def track_streets(env: gym.Env, localizer: AppearanceLocalizer, measurement: str
                        np.random.default_rng(seed))
     pilot = PurePursuit(tour, speed=speed, w_max=base.W_MAX, closed=False)
     return _track(env, localizer, measurement, pilot, pilot.start_pose(0), steps, seed,
-                  keep_images, allow_other_city, wrapper_options)
+                  keep_images, allow_other_city, wrapper_options, recover=recover)
 
 
 def track_off_lane(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
                    steps: int, seed: int = 0, keep_images: bool = False,
                    speed: float = 0.6, allow_other_city: bool = False,
-                   **wrapper_options: Any) -> TrackResult:
+                   recover: bool = False, **wrapper_options: Any) -> TrackResult:
     """Drive ``steps`` steps off the lanes (:func:`envs.off_lane.off_lane_waypoints` drawn from
     ``seed``: weaving across the streets, U-turns, turning on the spot at corners) with
     :class:`envs.off_lane.OffLanePilot` on the belief mean, from the first waypoint at a
     random heading (other arguments as :func:`track_route`)."""
     pilot, start = off_lane_pilot(env.unwrapped, steps, seed, speed)
     return _track(env, localizer, measurement, pilot, start, steps, seed,
-                  keep_images, allow_other_city, wrapper_options)
+                  keep_images, allow_other_city, wrapper_options, recover=recover)
 
 
 #: the closed-loop drive of each training set
@@ -350,7 +353,8 @@ def _track(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
            pilot: PurePursuit | OffLanePilot,
            start: Array, steps: int, seed: int, keep_images: bool, allow_other_city: bool,
            wrapper_options: dict[str, Any],
-           recorder: Callable[[gym.Env], gym.Env] | None = None) -> TrackResult:
+           recorder: Callable[[gym.Env], gym.Env] | None = None,
+           recover: bool = False) -> TrackResult:
     if measurement not in MEASUREMENTS:
         raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
     base = env.unwrapped
@@ -363,9 +367,11 @@ def _track(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
     status, controls, images = [info["measurement_status"]], [], [obs.get("image")]
     dr = [info["pose"].copy()]
     space = env.action_space
+    recovery = Recovery(base.W_MAX) if recover else None
     t0 = time.perf_counter()
     for _ in range(steps):
-        u = np.clip(pilot(obs["pose_mean"].astype(np.float64)), space.low, space.high)
+        u = _steer(pilot, recovery, obs["pose_mean"].astype(np.float64), info)
+        u = np.clip(u, space.low, space.high)
         obs, _, _, _, info = driven.step(u)
         controls.append(u)
         dr.append(base.motion_model.predict(dr[-1], localizer.control_gain_ * u))
@@ -380,6 +386,13 @@ def _track(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
                        np.array(rows["nis"], dtype=np.float64), info["nis_dof"],
                        np.array(rows["nees"], dtype=np.float64), status, seconds,
                        np.array(images) if keep_images else None)
+
+
+def _steer(pilot: PurePursuit | OffLanePilot, recovery: Recovery | None, mean: Array,
+           info: dict[str, Any]) -> Array:
+    """The pilot's command on the belief ``mean``, unless ``recovery`` acts on ``info``."""
+    u = None if recovery is None else recovery.act(float(mean[2]), info)
+    return pilot(mean) if u is None else u.astype(np.float64)
 
 
 def nees_band(n_runs: int, prob: float = 0.95, dof: int = 3) -> tuple[float, float]:

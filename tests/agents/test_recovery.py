@@ -1,0 +1,53 @@
+"""Recovery: what a pilot does before it steers on the belief (back off after a contact, look
+around while lost), alone and in the closed-loop tracking drives (``recover=True``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agents.recovery import Recovery
+from localization.workflows.tracking import _steer
+
+
+class _Pilot:
+    """A pilot that records the beliefs it was asked to steer on."""
+
+    def __init__(self) -> None:
+        self.asked: list[np.ndarray] = []
+
+    def __call__(self, mean: np.ndarray) -> np.ndarray:
+        self.asked.append(mean)
+        return np.array([0.6, 0.1])
+
+
+def test_recovery_lets_the_pilot_steer_unless_bumped_or_lost() -> None:
+    rec = Recovery(w_max=1.0, back_off_steps=2, back_off_speed=0.3, look_rate=0.5, look_dwell=1)
+    for info in (None, {}, {"belief_status": "tracking"}, {"belief_status": "doubtful"}):
+        assert rec.act(0.2, info) is None
+    np.testing.assert_array_equal(rec.act(0.2, {"collision": True}), np.array([-0.3, 0.0], np.float32))
+    np.testing.assert_array_equal(rec.act(0.2, {}), np.array([-0.3, 0.0], np.float32))  # two steps of reversing
+    assert rec.act(0.2, {}) is None
+    np.testing.assert_array_equal(rec.act(0.2, {"belief_status": "lost"}), [0.0, -0.5])
+    rec.reset()
+    assert rec.act(0.2, {}) is None
+
+
+@pytest.mark.parametrize("name, value", [("w_max", 0.0), ("back_off_steps", -1),
+                                         ("back_off_speed", 2.0), ("look_rate", -0.1),
+                                         ("look_dwell", 1.5)])
+def test_recovery_names_a_bad_argument(name: str, value: float) -> None:
+    with pytest.raises((ValueError, TypeError), match=name):
+        Recovery(**{name: value})
+
+
+def test_tracking_drive_asks_its_pilot_only_when_recovery_does_not_act() -> None:
+    pilot, mean = _Pilot(), np.array([1.0, 2.0, 0.3])
+    rec = Recovery(look_rate=0.5)
+    np.testing.assert_array_equal(_steer(pilot, None, mean, {"belief_status": "lost"}),
+                                  [0.6, 0.1])  # recover=False: the pilot steers on any belief
+    np.testing.assert_array_equal(_steer(pilot, rec, mean, {"belief_status": "lost"}),
+                                  [0.0, -0.5])
+    np.testing.assert_array_equal(_steer(pilot, rec, mean, {"belief_status": "tracking"}),
+                                  [0.6, 0.1])
+    assert len(pilot.asked) == 2
