@@ -415,7 +415,8 @@ def _nan_mean(x: Array) -> float:
 
 
 def track_metrics(run: TrackResult) -> dict[str, float]:
-    """Scores of one run (positions in metres, headings in radians)."""
+    """Scores of one run (positions in metres, headings in radians; ``distance``: the path the
+    robot drove, a stalled robot's is short)."""
     err = np.hypot(*(run.mean[:, :2] - run.true[:, :2]).T)
     dr = np.hypot(*(run.dead_reckoning[:, :2] - run.true[:, :2]).T)
     yaw = wrap_angle(run.mean[:, 2] - run.true[:, 2])
@@ -427,4 +428,5 @@ def track_metrics(run: TrackResult) -> dict[str, float]:
             "max_error": float(err.max()), "yaw_rmse": float(np.sqrt(np.mean(yaw ** 2))),
             "nees_mean": float(np.mean(run.nees)), "nis_mean": _nan_mean(run.nis),
             "nis_dof": run.nis_dof, "accepted": float(np.mean(status == "accepted")),
+            "distance": float(np.hypot(*np.diff(run.true[:, :2], axis=0).T).sum()),
             "ms_per_step": 1e3 * run.seconds_per_step}

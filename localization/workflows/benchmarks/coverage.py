@@ -240,7 +240,8 @@ def summarize_drives(runs: list[dict[str, float]]) -> dict[str, Any]:
             "ratio": rmse / rmse_dr if rmse_dr > 0 else float("nan"),
             "max_error": float(max(r["max_error"] for r in runs)),
             "nees_mean": float(np.mean([r["nees_mean"] for r in runs])), "nees_band": [lo, hi],
-            "accepted": float(np.mean([r["accepted"] for r in runs]))}
+            "accepted": float(np.mean([r["accepted"] for r in runs])),
+            "distance": float(np.mean([r.get("distance", np.nan) for r in runs]))}
 
 
 def _result(args: CoverageBenchConfig, done: list[int], cameras: list[str],

@@ -79,6 +79,8 @@ def test_quick_run_end_to_end(tmp_path: Path, belief: str):
     assert "| 51 | 2000 | " in table and "<= 0.20" in table and "districts" in table
     assert "60 m" in saved["setup"] and f"{belief} belief" in saved["setup"]
     assert ("restarts from familiar images" in saved["setup"]) == (belief == "ekf")
+    assert "looks around while lost" in saved["setup"]  # the tour pilot's Recovery, by default
+    assert 0.0 < loop["distance"] < 40 * 0.1 * 1.0 + 1e-9  # 40 steps of 0.1 s, |v| <= 1 m/s
 
 
 def test_a_failed_fit_is_reported_and_the_run_goes_on(tmp_path: Path, monkeypatch):
