@@ -19,8 +19,11 @@ sharing ``overlap`` metres (docs/method.md §12.1); ``districts=1`` fits one map
   share over 1 m);
 * closed loop: ``n_drives`` random street tours of ``drive_steps`` steps
   (:func:`~localization.workflows.tracking.track_streets`, EKF, "representation" model) on
-  the belief mean; position RMSE pooled over the drives against dead reckoning's on the same
-  controls, and the mean of the run-averaged NEES against its 95 % chi-square band
+  the belief mean (with ``recover``, the default, an :class:`agents.recovery.Recovery` backs
+  off after contacts and looks around while the belief is lost, as the scripted agent does;
+  chosen on tuning cities 53 and 56, docs/benchmarks.md §10); the metres each tour drove;
+  position RMSE pooled over the drives against dead reckoning's on the same controls, and
+  the mean of the run-averaged NEES against its 95 % chi-square band
   (:func:`~localization.workflows.tracking.nees_band`). Target (issue 13): RMSE <= 0.20 m.
 * agents: ``episodes`` episodes of the scripted agent (:class:`agents.scripted.ScriptedAgent`,
   car-like "drive" plans) from a street lane to a random street goal on the belief, and the
@@ -28,7 +31,8 @@ sharing ``overlap`` metres (docs/method.md §12.1); ``districts=1`` fits one map
   truncated at :func:`envs.episode_steps` of the city (1500 steps); success rates.
 
 Cities 51, 52 were never used to choose anything; ``districts``, ``overlap`` and ``density``
-were set on tuning city 53 (docs/benchmarks.md §10). One map of the city at 24 images a
+were set on tuning city 53 (docs/benchmarks.md §10); city 56 is a second tuning city
+(stop 62). One map of the city at 24 images a
 square metre (48000) folds: psi*'s median error 10.1 m, belief RMSE 31.6 m. 3 x 3 districts
 of the same images: median 0.22 m (but 22 % of images off by more than 1 m), and one of
 three 1000-step tours lost (0.66 m RMSE). At the default city's density, 47 a square metre
@@ -114,7 +118,7 @@ class City60BenchConfig:
     recover: bool = field(default=True, metadata={
         "help": "the tour pilot backs off after a contact and stops to look along the streets "
                 "while the belief is lost, as the scripted agent does (agents.Recovery; "
-                "chosen on city 53)"})
+                "chosen on cities 53 and 56)"})
     n_drive: int = field(default=1500, metadata={"help": "steps of each noise-calibration drive"})
     n_drives: int = field(default=6, metadata={
         "help": "street tours per city (6: with 3, held-out city 51 showed one lost tour of "
