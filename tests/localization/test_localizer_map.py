@@ -175,10 +175,12 @@ def _fit(n_train: int):
 
 
 def test_fit_city_localizer_warns_when_under_trained(envs01):
-    # measured: 200 images -> belief RMSE 4.64 m vs dead reckoning 3.60 m (3.93 vs 2.94 before
-    # the walls were smooth). 300 images were the case until then (4.18 vs 1.04 m); on smooth
-    # walls the drives slide along a building where they stuck, and 300 read 3.87 vs 4.25 m
-    loc, seconds, warned = _fit(200)
+    # measured: 150 images -> belief RMSE 3.3 m, 4.6x dead reckoning's with the BLAS / torch
+    # threads of the machine and 2.5x with one thread (how `make test` runs). 200 images read
+    # 4.64 m, 1.3x, but 2.13 m, 0.38x on one thread: a fit this thin is chaotic in the
+    # summation order, so the case is chosen to be worse than dead reckoning both ways.
+    # (300 images were the case before the walls were smooth: 4.18 vs 1.04 m.)
+    loc, seconds, warned = _fit(150)
     assert loc.quality_["ratio"] > 1.0
     assert len(warned) == 1
     message = str(warned[0].message)
