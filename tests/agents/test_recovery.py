@@ -25,8 +25,9 @@ def test_recovery_lets_the_pilot_steer_unless_bumped_or_lost() -> None:
     rec = Recovery(w_max=1.0, back_off_steps=2, back_off_speed=0.3, look_rate=0.5, look_dwell=1)
     for info in (None, {}, {"belief_status": "tracking"}, {"belief_status": "doubtful"}):
         assert rec.act(0.2, info) is None
-    np.testing.assert_array_equal(rec.act(0.2, {"collision": True}), np.array([-0.3, 0.0], np.float32))
-    np.testing.assert_array_equal(rec.act(0.2, {}), np.array([-0.3, 0.0], np.float32))  # two steps of reversing
+    back = np.array([-0.3, 0.0], np.float32)
+    np.testing.assert_array_equal(rec.act(0.2, {"collision": True}), back)
+    np.testing.assert_array_equal(rec.act(0.2, {}), back)  # two steps of reversing
     assert rec.act(0.2, {}) is None
     np.testing.assert_array_equal(rec.act(0.2, {"belief_status": "lost"}), [0.0, -0.5])
     rec.reset()

@@ -299,7 +299,7 @@ def markdown(result: dict[str, Any]) -> str:
         n_train = s.get("n_train", "")
         lines.append(
             f"| {name} | {n_train} | {one['median']:.2f} | {100 * one['over_1m']:.0f} % | "
-            f"{c['drives']} | {c.get('distance', np.nan):.1f} | {c['rmse']:.3f} "
+            f"{c['drives']} | {c['distance']:.1f} | {c['rmse']:.3f} "
             f"{_mark(c['rmse'] <= RMSE_TARGET)} | {c['rmse_dead_reckoning']:.2f} | "
             f"{c['ratio']:.3f} | {c['max_error']:.2f} | {c['nees_mean']:.2f} [{lo:.2f}, "
             f"{hi:.2f}] {_mark(lo <= c['nees_mean'] <= hi)} | {100 * c['accepted']:.0f} % | "

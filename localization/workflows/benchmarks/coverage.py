@@ -241,7 +241,7 @@ def summarize_drives(runs: list[dict[str, float]]) -> dict[str, Any]:
             "max_error": float(max(r["max_error"] for r in runs)),
             "nees_mean": float(np.mean([r["nees_mean"] for r in runs])), "nees_band": [lo, hi],
             "accepted": float(np.mean([r["accepted"] for r in runs])),
-            "distance": float(np.mean([r.get("distance", np.nan) for r in runs]))}
+            "distance": float(np.mean([r["distance"] for r in runs]))}
 
 
 def _result(args: CoverageBenchConfig, done: list[int], cameras: list[str],

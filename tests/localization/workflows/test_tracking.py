@@ -110,3 +110,25 @@ def test_closed_loop_under_sensor_noise_holds(city, runs):
     lo, hi = nees_band(len(metrics))
     mean = float(np.mean([m["nees_mean"] for m in metrics]))
     assert lo <= mean <= hi, (mean, lo, hi)
+
+
+def test_recover_asks_a_recovery_before_every_command_and_obeys_it(city, monkeypatch):
+    """``recover=True``: a Recovery sees each step's ``info`` before the pilot; where it acts,
+    its action is the command; where it does not, the drive is the plain one."""
+    from localization.filtering.divergence import BELIEF_STATUSES
+    from localization.workflows import tracking
+
+    seen: list[str] = []
+
+    class Spy(tracking.Recovery):
+        def act(self, yaw, info):
+            seen.append(info["belief_status"])
+            return np.array([0.0, 0.5], np.float32) if len(seen) == 10 else None
+
+    monkeypatch.setattr(tracking, "Recovery", Spy)
+    env, loc = city
+    plain = track_route(env, loc, "representation", 30, seed=20)
+    spied = track_route(env, loc, "representation", 30, seed=20, recover=True)
+    assert len(seen) == 30 and set(seen) <= set(BELIEF_STATUSES)
+    np.testing.assert_array_equal(spied.controls[:9], plain.controls[:9])
+    np.testing.assert_array_equal(spied.controls[9], [0.0, 0.5])
