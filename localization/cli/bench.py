@@ -233,8 +233,10 @@ def _check_city60_bench(c: City60BenchConfig) -> None:
                                "n_drives", "drive_steps", "episodes", "districts",
                                "lane_heading"),
                   non_negative=("motion_noise", "max_episode_steps", "seed", "overlap",
-                                "heading_check", "familiar_novelty"),
+                                "heading_check", "familiar_novelty", "hold_speed"),
                   prefix="city60_")
+    if c.hold_speed > 1.0:  # the env's speed bound
+        raise UsageError("city60_hold_speed", f"must be <= 1 m/s, got {c.hold_speed}")
     try:
         check_city_layout(c.city_size)
     except ValueError as err:

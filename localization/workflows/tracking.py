@@ -293,7 +293,7 @@ def track_route(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
                 steps: int, start: int = 0, seed: int = 0, keep_images: bool = False,
                 allow_other_city: bool = False,
                 recorder: Callable[[gym.Env], gym.Env] | None = None,
-                recover: bool = False, **wrapper_options: Any) -> TrackResult:
+                recover: bool | Recovery = False, **wrapper_options: Any) -> TrackResult:
     """Drive ``steps`` steps along the city's route on the belief mean.
 
     The robot starts on the route's path point ``start`` (``PurePursuit.path``), heading
@@ -303,7 +303,8 @@ def track_route(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
     another city raises :class:`~localization.localizer.OtherCityError` unless
     ``allow_other_city``. With ``recover`` a :class:`~agents.recovery.Recovery` acts before
     the pilot: it backs off after a contact and, while ``info["belief_status"]`` is "lost",
-    stops and looks along the street axes instead of steering on the belief.
+    stops and looks along the street axes instead of steering on the belief; pass a
+    :class:`~agents.recovery.Recovery` for other settings (e.g. ``hold_speed``).
     """
     base = env.unwrapped
     pilot = PurePursuit(base.city.route(), w_max=base.W_MAX)
@@ -314,7 +315,7 @@ def track_route(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
 def track_streets(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
                   steps: int, seed: int = 0, keep_images: bool = False,
                   speed: float = 0.6, allow_other_city: bool = False,
-                  recover: bool = False, **wrapper_options: Any) -> TrackResult:
+                  recover: bool | Recovery = False, **wrapper_options: Any) -> TrackResult:
     """Drive ``steps`` steps along a random tour of the streets (``envs.lanes.street_tour``
     drawn from ``seed``) on the belief mean, from the tour's first intersection (other
     arguments as :func:`track_route`)."""
@@ -329,7 +330,7 @@ def track_streets(env: gym.Env, localizer: AppearanceLocalizer, measurement: str
 def track_off_lane(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
                    steps: int, seed: int = 0, keep_images: bool = False,
                    speed: float = 0.6, allow_other_city: bool = False,
-                   recover: bool = False, **wrapper_options: Any) -> TrackResult:
+                   recover: bool | Recovery = False, **wrapper_options: Any) -> TrackResult:
     """Drive ``steps`` steps off the lanes (:func:`envs.off_lane.off_lane_waypoints` drawn from
     ``seed``: weaving across the streets, U-turns, turning on the spot at corners) with
     :class:`envs.off_lane.OffLanePilot` on the belief mean, from the first waypoint at a
@@ -354,7 +355,7 @@ def _track(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
            start: Array, steps: int, seed: int, keep_images: bool, allow_other_city: bool,
            wrapper_options: dict[str, Any],
            recorder: Callable[[gym.Env], gym.Env] | None = None,
-           recover: bool = False) -> TrackResult:
+           recover: bool | Recovery = False) -> TrackResult:
     if measurement not in MEASUREMENTS:
         raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
     base = env.unwrapped
@@ -367,7 +368,7 @@ def _track(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
     status, controls, images = [info["measurement_status"]], [], [obs.get("image")]
     dr = [info["pose"].copy()]
     space = env.action_space
-    recovery = Recovery(base.W_MAX) if recover else None
+    recovery = _recovery(recover, base.W_MAX)
     t0 = time.perf_counter()
     for _ in range(steps):
         u = _steer(pilot, recovery, obs["pose_mean"].astype(np.float64), info)
@@ -386,6 +387,18 @@ def _track(env: gym.Env, localizer: AppearanceLocalizer, measurement: str,
                        np.array(rows["nis"], dtype=np.float64), info["nis_dof"],
                        np.array(rows["nees"], dtype=np.float64), status, seconds,
                        np.array(images) if keep_images else None)
+
+
+def _recovery(recover: bool | Recovery, w_max: float) -> Recovery | None:
+    """The drive's Recovery: a default one for True, none for False, ``recover`` itself
+    (reset) when it is one."""
+    if isinstance(recover, Recovery):
+        recover.reset()
+        return recover
+    if not isinstance(recover, (bool, np.bool_)):
+        raise TypeError(f"recover must be a bool or an agents.Recovery, got "
+                        f"{type(recover).__name__}")
+    return Recovery(w_max) if recover else None
 
 
 def _steer(pilot: PurePursuit | OffLanePilot, recovery: Recovery | None, mean: Array,

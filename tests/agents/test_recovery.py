@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from agents.recovery import Recovery
-from localization.workflows.tracking import _steer
+from localization.workflows.tracking import _recovery, _steer
 
 
 class _Pilot:
@@ -36,7 +36,8 @@ def test_recovery_lets_the_pilot_steer_unless_bumped_or_lost() -> None:
 
 @pytest.mark.parametrize("name, value", [("w_max", 0.0), ("back_off_steps", -1),
                                          ("back_off_speed", 2.0), ("look_rate", -0.1),
-                                         ("look_dwell", 1.5)])
+                                         ("look_dwell", 1.5), ("hold_speed", -0.1),
+                                         ("hold_speed", 1.5)])
 def test_recovery_names_a_bad_argument(name: str, value: float) -> None:
     with pytest.raises((ValueError, TypeError), match=name):
         Recovery(**{name: value})
@@ -52,3 +53,31 @@ def test_tracking_drive_asks_its_pilot_only_when_recovery_does_not_act() -> None
     np.testing.assert_array_equal(_steer(pilot, rec, mean, {"belief_status": "tracking"}),
                                   [0.6, 0.1])
     assert len(pilot.asked) == 2
+
+
+def test_hold_speed_keeps_the_course_while_the_belief_is_unconfirmed() -> None:
+    """With ``hold_speed`` a "relocalizing" belief is not steered on: straight on at that
+    speed; contacts still back off first and "lost" still looks around; without it the
+    pilot steers on an unconfirmed belief as before."""
+    assert Recovery().act(0.2, {"belief_status": "relocalizing"}) is None
+    rec = Recovery(back_off_steps=1, back_off_speed=0.3, look_rate=0.5, hold_speed=0.25)
+    hold = np.array([0.25, 0.0], np.float32)
+    np.testing.assert_array_equal(rec.act(0.2, {"belief_status": "relocalizing"}), hold)
+    np.testing.assert_array_equal(
+        rec.act(0.2, {"belief_status": "relocalizing", "collision": True}),
+        np.array([-0.3, 0.0], np.float32))
+    np.testing.assert_array_equal(rec.act(0.2, {"belief_status": "relocalizing"}), hold)
+    np.testing.assert_array_equal(rec.act(0.2, {"belief_status": "lost"}), [0.0, -0.5])
+    for status in ("tracking", "doubtful"):
+        assert rec.act(0.2, {"belief_status": status}) is None
+
+
+def test_a_drive_takes_true_false_or_its_own_recovery() -> None:
+    assert _recovery(False, 1.0) is None
+    default = _recovery(True, 0.8)
+    assert isinstance(default, Recovery) and default.w_max == 0.8 and default.hold_speed is None
+    own = Recovery(hold_speed=0.3)
+    own.act(0.0, {"collision": True})  # mid back-off: the drive starts it afresh
+    assert _recovery(own, 1.0) is own and own.act(0.0, {}) is None
+    with pytest.raises(TypeError, match="recover"):
+        _recovery("yes", 1.0)  # type: ignore[arg-type]

@@ -20,8 +20,9 @@ sharing ``overlap`` metres (docs/method.md §12.1); ``districts=1`` fits one map
 * closed loop: ``n_drives`` random street tours of ``drive_steps`` steps
   (:func:`~localization.workflows.tracking.track_streets`, EKF, "representation" model) on
   the belief mean (with ``recover``, the default, an :class:`agents.recovery.Recovery` backs
-  off after contacts and looks around while the belief is lost, as the scripted agent does;
-  chosen on tuning cities 53 and 56, docs/benchmarks.md §10); the metres each tour drove;
+  off after contacts and looks around while the belief is lost, as the scripted agent does,
+  and keeps its course at ``hold_speed`` while the belief is unconfirmed; chosen on tuning
+  cities 53, 56 and 57, docs/benchmarks.md §10); the metres each tour drove;
   position RMSE pooled over the drives against dead reckoning's on the same controls, and
   the mean of the run-averaged NEES against its 95 % chi-square band
   (:func:`~localization.workflows.tracking.nees_band`). Target (issue 13): RMSE <= 0.20 m.
@@ -61,6 +62,7 @@ import numpy as np
 from tqdm import tqdm
 
 from agents.evaluation import as_records, run_episodes, summarize
+from agents.recovery import Recovery
 from agents.scripted import ScriptedAgent
 from agents.sources import make_pose_env
 from envs.datasets import collect_dataset
@@ -119,6 +121,11 @@ class City60BenchConfig:
         "help": "the tour pilot backs off after a contact and stops to look along the streets "
                 "while the belief is lost, as the scripted agent does (agents.Recovery; "
                 "chosen on cities 53 and 56)"})
+    hold_speed: float = field(default=0.3, metadata={
+        "help": "with --city60-recover, the tour pilot keeps its course at this speed (m/s) "
+                "while the belief is 'relocalizing' (a start or restart not yet confirmed) "
+                "instead of steering on it (Recovery hold_speed; chosen on cities 53, 56 and "
+                "57); 0: steer on it"})
     n_drive: int = field(default=1500, metadata={"help": "steps of each noise-calibration drive"})
     n_drives: int = field(default=6, metadata={
         "help": "street tours per city (6: with 3, held-out city 51 showed one lost tour of "
@@ -219,9 +226,16 @@ def tours(args: City60BenchConfig, env: gym.Env, loc: Any, base: int) -> list[di
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", category=RuntimeWarning, module="localization")
         return [track_metrics(track_streets(env, loc, "representation", args.drive_steps,
-                                            seed=base + k, recover=args.recover,
+                                            seed=base + k, recover=_recovery(args, env),
                                             **_belief(args)))
                 for k in range(args.n_drives)]
+
+
+def _recovery(args: City60BenchConfig, env: gym.Env) -> Recovery | bool:
+    """The tours' :class:`~agents.recovery.Recovery` (False without ``recover``)."""
+    if not args.recover:
+        return False
+    return Recovery(env.unwrapped.W_MAX, hold_speed=args.hold_speed or None)
 
 
 def _belief(args: City60BenchConfig) -> dict[str, Any]:
@@ -345,6 +359,8 @@ def _filter_label(args: City60BenchConfig) -> str:
         parts.append(f"restarts from familiar images (novelty <= {args.familiar_novelty:g})")
     if args.recover:
         parts.append("the tour pilot backs off after contacts and looks around while lost")
+        if args.hold_speed:
+            parts.append(f"keeps its course at {args.hold_speed:g} m/s while relocalizing")
     return ", ".join(parts)
 
 

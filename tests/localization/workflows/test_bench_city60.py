@@ -31,6 +31,8 @@ from localization.workflows.tracking import street_train_size
     ("heading_check", -0.1, "--city60-heading-check"),
     ("familiar_novelty", -1.0, "--city60-familiar-novelty"),
     ("lane_heading", 0.0, "--city60-lane-heading"),
+    ("hold_speed", -0.1, "--city60-hold-speed"),
+    ("hold_speed", 1.5, "--city60-hold-speed"),
 ])
 def test_bad_options_are_named(field, value, option):
     args = Args(only="city60", city60=City60BenchConfig(**{field: value}))
@@ -80,6 +82,7 @@ def test_quick_run_end_to_end(tmp_path: Path, belief: str):
     assert "60 m" in saved["setup"] and f"{belief} belief" in saved["setup"]
     assert ("restarts from familiar images" in saved["setup"]) == (belief == "ekf")
     assert "looks around while lost" in saved["setup"]  # the tour pilot's Recovery, by default
+    assert "keeps its course at 0.3 m/s while relocalizing" in saved["setup"]
     assert 0.0 < loop["distance"] < 40 * 0.1 * 1.0 + 1e-9  # 40 steps of 0.1 s, |v| <= 1 m/s
 
 
