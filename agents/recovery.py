@@ -71,7 +71,7 @@ class Recovery:
       view that could correct it. Held on course along its street, the robot keeps seeing
       views the map knows until a later image's psi* replaces the trial belief (on the 60 m
       tuning cities 53, 56 and 57, 120 tours of the tracking drives, docs/benchmarks.md
-      §10: belief RMSE pooled 0.461 -> 0.291 m at 0.3 m/s).
+      §10: belief RMSE pooled 0.461 -> 0.333 m at 0.3 m/s).
 
     Call :meth:`reset` between episodes.
     """
