@@ -32,8 +32,8 @@ sharing ``overlap`` metres (docs/method.md §12.1); ``districts=1`` fits one map
   truncated at :func:`envs.episode_steps` of the city (1500 steps); success rates.
 
 Cities 51, 52 were never used to choose anything; ``districts``, ``overlap`` and ``density``
-were set on tuning city 53 (docs/benchmarks.md §10); city 56 is a second tuning city
-(stop 62). One map of the city at 24 images a
+were set on tuning city 53 (docs/benchmarks.md §10); cities 56 and 57 are a second and a
+third tuning city (stops 62, 63). One map of the city at 24 images a
 square metre (48000) folds: psi*'s median error 10.1 m, belief RMSE 31.6 m. 3 x 3 districts
 of the same images: median 0.22 m (but 22 % of images off by more than 1 m), and one of
 three 1000-step tours lost (0.66 m RMSE). At the default city's density, 47 a square metre

@@ -131,3 +131,27 @@ def test_a_saved_localizer_is_reused_for_its_city_only(tmp_path: Path, monkeypat
     assert other["summary"] == {}
     assert other["fit_failures"][0].startswith(f"city 52: {maps / 'localizer_52.npz'}: ")
     assert "fitted on" in other["fit_failures"][0]
+
+
+def test_tours_drive_with_the_configured_recovery(monkeypatch):
+    """The setup label is not the tours: each tour gets its own Recovery with the env's w_max
+    and ``hold_speed`` (0: none), or no recovery at all without ``recover``."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from localization.workflows.benchmarks import city60
+
+    seen: list = []
+    monkeypatch.setattr(city60, "track_streets",
+                        lambda *a, recover, **kw: seen.append(recover))
+    monkeypatch.setattr(city60, "track_metrics", lambda run: {})
+    env = SimpleNamespace(unwrapped=SimpleNamespace(W_MAX=0.8))
+    args = City60BenchConfig(n_drives=2)
+    city60.tours(args, env, None, 100)
+    assert [(r.w_max, r.hold_speed) for r in seen] == [(0.8, 0.3)] * 2 and seen[0] is not seen[1]
+    seen.clear()
+    city60.tours(dataclasses.replace(args, hold_speed=0.0), env, None, 100)
+    assert [r.hold_speed for r in seen] == [None, None]
+    seen.clear()
+    city60.tours(dataclasses.replace(args, recover=False), env, None, 100)
+    assert seen == [False, False]
