@@ -56,7 +56,8 @@ LOCALIZE = ("image", "global")
 #: filter_options each filter takes (the rest of its settings are BeliefWrapper's arguments)
 FILTER_OPTIONS = {
     "ekf": ("detect_divergence", "alpha", "inflate_factor", "noise", "free_space",
-            "contact_motion", "project_contacts", "heading_check", "familiar_novelty"),
+            "contact_motion", "project_contacts", "heading_check", "familiar_novelty",
+            "turn_response"),
     "particles": ("n_particles", "min_particles", "kld_epsilon", "kld_confidence",
                   "resample_threshold", "resample", "alpha", "alpha_slow",
                   "alpha_fast", "injection_ratio", "max_injection", "ambiguous_injection",

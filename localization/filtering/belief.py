@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from envs.control_response import TurnResponse, turn_response_for
 from localization._validation import check_bool, check_choice, check_int, check_real
 from localization.filtering._belief_recovery import RecoveryMixin
 from localization.filtering._belief_status import (  # noqa: F401 (LOST_*: the belief's names)
@@ -137,6 +138,12 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
         this is unfamiliar; a start from the first image is then unverified until a familiar
         image's psi* agrees with the belief (else the belief restarts there), and every other
         restart from an image needs a familiar one. None: off (every in-domain image).
+    turn_response : bool or TurnResponse
+        Predict the turn rate the robot really turns at for U
+        (:mod:`envs.control_response`; True: the env's robot): ``k U`` becomes
+        ``[k_v v, r(v, w)]``. On the spot the robot turns at 0.7 of a 0.5 rad/s command, and a
+        belief that turns with the command looks around along headings the maps never saw
+        (60 m tuning cities, docs/benchmarks.md §10 stop 64). False: ``k U``.
 
     Attributes
     ----------
@@ -158,7 +165,8 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
                  noise: str = "global", free_space: FreeSpace | None = None,
                  contact_motion: str = "blocked", project_contacts: bool = True,
                  heading_check: float | None = None,
-                 familiar_novelty: float | None = None) -> None:
+                 familiar_novelty: float | None = None,
+                 turn_response: bool | TurnResponse = False) -> None:
         check_localizer(localizer)
         check_choice(noise, "noise", NOISE_MODELS)
         self.contact_motion = check_choice(contact_motion, "contact_motion", CONTACT_MOTIONS)
@@ -201,6 +209,7 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
         self.free_space = check_free_space(free_space)
         self.heading_check = check_heading_check(heading_check, measurement)
         self.familiar_novelty = check_familiar_novelty(familiar_novelty, localizer)
+        self.turn_response = turn_response_for(turn_response)
         self._unverified = False  # a start from an unfamiliar image, not yet checked
         self.project_contacts = check_bool(project_contacts, "project_contacts")
         self._bumped = 0  # steps left "lost" after a contact that contradicts the belief
@@ -391,7 +400,10 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
     def _step_motion(self, u: ArrayLike, kinds: frozenset[str]) -> tuple[Array, Array | None]:
         """The control ``k U`` of this step and its extra process noise (a contact's, of
         ``kinds``, with ``contact_motion="blocked"``; None otherwise)."""
-        u_k = self.gain * np.asarray(u, dtype=np.float64)
+        u = np.asarray(u, dtype=np.float64)
+        u_k = self.gain * u
+        if self.turn_response is not None:
+            u_k[1] = self.turn_response(u)
         if kinds and self.contact_motion == "blocked":
             assert self.ekf is not None
             return blocked_motion(self.motion_model, self.ekf.x, u_k, "traffic" in kinds)
