@@ -117,6 +117,10 @@ class City60BenchConfig:
                 "and checks a start from a more novel first image against the first familiar "
                 "one (BeliefFilter familiar_novelty; chosen on city 53; district maps only); "
                 "0: off"})
+    turn_response: bool = field(default=True, metadata={
+        "help": "the EKF predicts the turn rate the robot really turns at for each command "
+                "(envs.control_response; BeliefFilter turn_response; chosen on cities 53, 56 "
+                "and 57)"})
     recover: bool = field(default=True, metadata={
         "help": "the tour pilot backs off after a contact and stops to look along the streets "
                 "while the belief is lost, as the scripted agent does (agents.Recovery; "
@@ -240,11 +244,13 @@ def _recovery(args: City60BenchConfig, env: gym.Env) -> Recovery | bool:
 
 def _belief(args: City60BenchConfig) -> dict[str, Any]:
     """BeliefWrapper options of ``args.filter`` (the particles spread over the city's free
-    streets by default; the EKF with ``heading_check`` and, on district maps,
-    ``familiar_novelty`` unless they are 0)."""
+    streets by default; the EKF with ``turn_response``, ``heading_check`` and, on district
+    maps, ``familiar_novelty`` unless they are off)."""
     if args.filter != "ekf":
         return {"filter": "particles"}
-    options: dict[str, float] = {}
+    options: dict[str, float | bool] = {}
+    if args.turn_response:
+        options["turn_response"] = True
     if args.heading_check:
         options["heading_check"] = args.heading_check
     if _familiar(args):
@@ -353,6 +359,8 @@ def _result(args: City60BenchConfig, records: dict[int, dict[str, Any]],
 
 def _filter_label(args: City60BenchConfig) -> str:
     parts = [f"{args.filter} belief"]
+    if args.filter == "ekf" and args.turn_response:
+        parts.append("turns predicted at the robot's measured rate")
     if args.filter == "ekf" and args.heading_check:
         parts.append(f"heading checked against psi* ({args.heading_check:g} rad)")
     if _familiar(args):
