@@ -10,7 +10,8 @@ and at 0.93-0.96 of the command while driving at 0.3-0.6 m/s (forward speed: 0.9
 A belief that predicts with the commanded w turns about 1.4 times as far as the robot while
 it turns on the spot to look around; then every image is off the maps and nothing brings the
 belief back (docs/benchmarks.md §10, stop 64). :data:`ROBOT_TURN_RESPONSE` is the measured
-yaw rate on a grid of commands, and ``BeliefFilter(turn_response=...)`` predicts with it.
+yaw rate on a grid of commands, and ``BeliefFilter(turn_response=...)`` predicts with it
+(opt-in: a steady state misreads curves driven with a w that changes every step, method §13.6).
 """
 
 from __future__ import annotations

@@ -143,7 +143,8 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
         (:mod:`envs.control_response`; True: the env's robot): ``k U`` becomes
         ``[k_v v, r(v, w)]``. On the spot the robot turns at 0.7 of a 0.5 rad/s command, and a
         belief that turns with the command looks around along headings the maps never saw
-        (60 m tuning cities, docs/benchmarks.md §10 stop 64). False: ``k U``.
+        (60 m tuning cities, docs/benchmarks.md §10 stop 64); but the table is a steady
+        state, which biases curves driven with a changing w (method §13.6). False: ``k U``.
 
     Attributes
     ----------

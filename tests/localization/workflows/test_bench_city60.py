@@ -157,16 +157,16 @@ def test_tours_drive_with_the_configured_recovery(monkeypatch):
     assert seen == [False, False]
 
 
-def test_the_belief_predicts_turns_with_the_robot_s_response_unless_told_not_to():
-    """``turn_response`` (the default) reaches the EKF's options; the particles get none."""
+def test_the_belief_predicts_turns_with_the_robot_s_response_when_asked():
+    """``turn_response`` (off by default) reaches the EKF's options; the particles get none."""
     import dataclasses
 
     from localization.workflows.benchmarks.city60 import _belief, _filter_label
 
     args = City60BenchConfig()
-    assert _belief(args)["filter_options"]["turn_response"] is True
-    assert "measured rate" in _filter_label(args)
-    off = dataclasses.replace(args, turn_response=False)
-    assert "turn_response" not in _belief(off)["filter_options"]
-    assert "measured rate" not in _filter_label(off)
-    assert _belief(dataclasses.replace(args, filter="particles")) == {"filter": "particles"}
+    assert "turn_response" not in _belief(args)["filter_options"]
+    assert "measured rate" not in _filter_label(args)
+    on = dataclasses.replace(args, turn_response=True)
+    assert _belief(on)["filter_options"]["turn_response"] is True
+    assert "measured rate" in _filter_label(on)
+    assert _belief(dataclasses.replace(on, filter="particles")) == {"filter": "particles"}
