@@ -34,7 +34,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from envs.control_response import TurnResponse, turn_response_for
 from localization._validation import check_bool, check_choice, check_int, check_real
 from localization.filtering._belief_recovery import RecoveryMixin
 from localization.filtering._belief_status import (  # noqa: F401 (LOST_*: the belief's names)
@@ -74,6 +73,7 @@ from localization.filtering.map_contact import (
 from localization.filtering.particle_start import DEFAULT_P0
 from localization.filtering.recorded_run import run_recorded
 from localization.filtering.restart_trial import RestartTrial, ViewOdometer
+from localization.filtering.turn_response import TurnResponse, turn_response_for
 from localization.geometry import Array
 
 STATUSES = ("initial", "accepted", "gated", "out_of_domain", "relocalized", "reverted")
@@ -140,7 +140,7 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
         restart from an image needs a familiar one. None: off (every in-domain image).
     turn_response : bool or TurnResponse
         Predict the turn rate the robot really turns at for U
-        (:mod:`envs.control_response`; True: the env's robot): ``k U`` becomes
+        (:mod:`localization.filtering.turn_response`; True: the env's robot): ``k U`` becomes
         ``[k_v v, r(v, w)]``. On the spot the robot turns at 0.7 of a 0.5 rad/s command, and a
         belief that turns with the command looks around along headings the maps never saw
         (60 m tuning cities, docs/benchmarks.md §10 stop 64); but the table is a steady

@@ -119,7 +119,7 @@ class City60BenchConfig:
                 "0: off"})
     turn_response: bool = field(default=False, metadata={
         "help": "the EKF predicts the turn rate the robot really turns at for each command "
-                "(envs.control_response; BeliefFilter turn_response; off: on 240 tuning tours "
+                "(localization.filtering.turn_response; BeliefFilter turn_response; off: on 240 tuning tours "
                 "of cities 53, 56 and 57 it read 0.375 m against 0.323, stop 64)"})
     recover: bool = field(default=True, metadata={
         "help": "the tour pilot backs off after a contact and stops to look along the streets "

@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 
 import envs  # noqa: F401 (registers the env)
-from envs.control_response import (
+from envs.motion_model import UnicycleModel
+from localization.filtering import BeliefFilter
+from localization.filtering.turn_response import (
     ROBOT_TURN_RESPONSE,
     TurnResponse,
     measure_turn_response,
     turn_response_for,
 )
-from envs.motion_model import UnicycleModel
-from localization.filtering import BeliefFilter
 
 
 def test_the_packaged_table_is_the_robot_s_physics_in_another_city():

@@ -130,5 +130,5 @@ def turn_response_for(option: object) -> TurnResponse | None:
         return option
     if option is None or isinstance(option, (bool, np.bool_)):
         return ROBOT_TURN_RESPONSE if option else None
-    raise TypeError("turn_response must be a bool or an envs.control_response.TurnResponse, "
+    raise TypeError("turn_response must be a bool or an localization.filtering.turn_response.TurnResponse, "
                     f"got {type(option).__name__}")
