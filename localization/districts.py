@@ -48,6 +48,7 @@ from localization.geometry import Array, body_to_world
 from localization.gse.graph import DisconnectedGraphError
 from localization.gse.inverse import refine_poses, verify_poses
 from localization.localizer import AppearanceLocalizer
+from localization.turned_views import check_turn_camera, turned_prediction
 
 __all__ = ["District", "DistrictLocalizer", "district_cells", "transform_maps"]
 
@@ -384,14 +385,26 @@ class DistrictLocalizer(DistrictNoiseMixin):
             d.check_ready()
 
     def predict(self, images: ArrayLike, refine: int = 0, verify: int = 0,
-                verify_margin: float = 3.0) -> Array:
+                verify_margin: float = 3.0, turns: int = 0) -> Array:
         """psi* (n, 3) of images, each by the district chosen as in :meth:`initial_belief`
         (NaN rows where no district's maps hold); ``verify`` > 0, ``refine`` > 0: checked
         against that many retrieved training poses, then refined by that many Gauss-Newton
-        steps, with the chosen district's maps (:meth:`AppearanceLocalizer.predict`)."""
+        steps, with the chosen district's maps; ``turns`` > 0: positions the median over
+        turned views (all as :meth:`AppearanceLocalizer.predict`)."""
         refine = check_int(refine, "refine", low=0)
         verify = check_int(verify, "verify", low=0)
         verify_margin = check_real(verify_margin, "verify_margin", low=1.0)
+        turns = check_int(turns, "turns", low=0)
+        self._check_fitted()
+        if turns:
+            check_turn_camera(self.camera_)
+        return turned_prediction(lambda views: self._predict_views(views, refine, verify,
+                                                                   verify_margin),
+                                 self.districts_[0].check_images(images), turns)
+
+    def _predict_views(self, images: ArrayLike, refine: int, verify: int,
+                       verify_margin: float) -> Array:
+        """psi* (n, 3) of images by their districts, verified and refined (:meth:`predict`)."""
         out, whiteners = [], {}  # each district's whitener, once
         for w in self.transform(images):
             found = self.candidates(w)

@@ -67,6 +67,7 @@ from localization.geometry import Array, wrap_angle
 from localization.gse.graph import fit_main_component
 from localization.gse.inverse import feature_whitener, refine_poses, verify_poses
 from localization.gse.regressor import GSERegressor
+from localization.turned_views import check_turn_camera, turned_prediction
 
 _YAW_BINS = 72
 
@@ -309,7 +310,7 @@ class AppearanceLocalizer(ImageFeaturesMixin, NoiseModelMixin, BeliefInterfaceMi
                                  "fit_noise()")
 
     def predict(self, images: ArrayLike, refine: int = 0, verify: int = 0,
-                verify_margin: float = 3.0) -> Array:
+                verify_margin: float = 3.0, turns: int = 0) -> Array:
         """psi*(X): poses (n, 3) of images (n, H, W, 3); NaN rows for images whose
         features lie outside the training domain.
 
@@ -324,11 +325,27 @@ class AppearanceLocalizer(ImageFeaturesMixin, NoiseModelMixin, BeliefInterfaceMi
         (:func:`~localization.gse.inverse.refine_poses`; 3 steps: on tuning cities 12-13
         the median error of street-wide single images fell by 20-29 %). Both need
         ``noise_["features"]`` (NotFittedError without: fit with ``noise_folds >= 2`` or
-        call :meth:`fit_noise`)."""
+        call :meth:`fit_noise`). ``turns`` > 0 (perspective camera only): the position is the
+        median over the image and its views shifted by 1..``turns`` pixels either way, each
+        estimated as above (:mod:`localization.turned_views`; the heading stays the image's
+        own, and rows out of the domain stay NaN; 2 on tuning cities 11-12: within (0.25 m,
+        2 deg) 74.9 -> 80.7 % on average over four appearance presets)."""
         refine = check_int(refine, "refine", low=0)
         verify = check_int(verify, "verify", low=0)
         verify_margin = check_real(verify_margin, "verify_margin", low=1.0)
+        turns = check_int(turns, "turns", low=0)
         self._check_fitted(noise=refine > 0 or verify > 0)
+        if turns:
+            check_turn_camera(self.camera_)
+        return turned_prediction(
+            lambda views: self._from_model(self._predict_view(views, refine, verify,
+                                                              verify_margin)),
+            self.check_images(images), turns)
+
+    def _predict_view(self, images: ArrayLike, refine: int, verify: int, verify_margin: float
+                      ) -> Array:
+        """psi* of each image in the regressor's poses (n, 3), verified and refined as
+        :meth:`predict` says."""
         W = self.transform(images)
         theta = self.regressor_.predict(W)
         L = self.feature_whitener() if verify or refine else None
@@ -336,7 +353,7 @@ class AppearanceLocalizer(ImageFeaturesMixin, NoiseModelMixin, BeliefInterfaceMi
             theta, _ = verify_poses(self.regressor_, W, theta, L, verify, verify_margin)
         if refine:
             theta = refine_poses(self.regressor_, W, theta, L, refine)
-        return self._from_model(theta)
+        return theta
 
     def feature_whitener(self) -> Array:
         """L (m, m) with ``L R L^T = I`` for the features' noise R (``noise_["features"]``)."""
