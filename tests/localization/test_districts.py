@@ -14,6 +14,7 @@ from localization.filtering.belief import BeliefFilter
 from localization.filtering.particles import ParticleBelief
 from localization.loading import load_localizer
 from localization.localizer import AppearanceLocalizer
+from localization.turned_views import turned_view
 from localization.wrappers import BeliefWrapper
 from tests.localization.conftest import ignore_gse_warnings, make_env
 
@@ -141,6 +142,23 @@ def test_initial_candidate_rates_the_image_of_the_initial_belief(split, drive):
     split_none = np.full(W.shape[1], 1e6)
     x0, _, u = split.initial_candidate(split_none)
     assert np.all(np.isnan(x0)) and u == float("inf")
+
+
+def test_predict_with_turns_takes_the_median_of_the_turned_views(split, drive):
+    """``predict(turns=1)``: each position the median over the image and its views shifted a
+    pixel either way, each placed by its own district; the heading stays the image's."""
+    images = drive[0][:12]
+    plain = split.predict(images)
+    turned = split.predict(images, turns=1)
+    assert np.array_equal(plain[:, 2], turned[:, 2], equal_nan=True)
+    views = np.stack([plain] + [split.predict(turned_view(images, s)) for s in (-1, 1)])
+    live = np.isfinite(plain).all(axis=1)
+    assert live.any()
+    assert np.allclose(turned[live, :2], np.nanmedian(views[:, live, :2], axis=0))
+    with pytest.raises(ValueError, match="turns"):
+        split.predict(images, turns=-1)
+    with pytest.raises(NotFittedError):
+        DistrictLocalizer().predict(images, turns=1)
 
 
 def test_bad_inputs_are_named(split, train):
