@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 from localization.cli._args import UsageError
 from localization.cli._recorded import check_data_options, check_out, load_data
 from localization.recorded import MAX_DIFFERENCE, write_tum
+from localization.turned_views import TURN_CAMERAS
 
 if TYPE_CHECKING:
     from localization.localizer import AppearanceLocalizer
@@ -54,6 +55,10 @@ class Args:
         "help": "largest time (s) between an image and its ground-truth pose"})
     resize: str = field(default="", metadata={
         "help": "resize the folder's images to HEIGHTxWIDTH (as when fitting)"})
+    turns: int = field(default=0, metadata={
+        "help": "perspective camera: each position the median over the image and its views "
+                "turned by 1..turns pixels either way (AppearanceLocalizer.predict(turns=...); "
+                "2 in the appearance benchmark)"})
     format: str = field(default="tum", metadata={"help": "output format: tum or npz"})
     out: str = field(default="results/poses.txt", metadata={
         "help": "output file (its folder is created)"})
@@ -69,8 +74,14 @@ def load_checked(args: Args) -> tuple[AppearanceLocalizer, Path]:
     if not Path(args.localizer).is_file():
         raise UsageError("localizer", f"no file at {args.localizer} (write one with "
                                 "'appearance-nav fit')")
+    if isinstance(args.turns, bool) or not isinstance(args.turns, int) or args.turns < 0:
+        raise UsageError("turns", f"must be an integer >= 0, got {args.turns!r}")
     out = check_out(args.out, ".npz" if args.format == "npz" else "")
-    return load_localizer(args.localizer), out
+    loc = load_localizer(args.localizer)
+    if args.turns and loc.camera_ not in (None, *TURN_CAMERAS):
+        raise UsageError("turns", f"applies to the cameras {', '.join(TURN_CAMERAS)}, but "
+                                  f"{args.localizer} was fitted for {loc.camera_!r}")
+    return loc, out
 
 
 def report_errors(estimate: NDArray[np.float64], truth: NDArray[np.float64]) -> None:
@@ -96,7 +107,7 @@ def run(args: Args) -> None:
                          f"(HxW) but {args.localizer} was fitted on {h}x{w}; pass "
                          f"--resize {h}x{w}")
     t0 = time.perf_counter()
-    poses = loc.predict(rec.images)
+    poses = loc.predict(rec.images, turns=args.turns)
     ok = np.all(np.isfinite(poses), axis=1)
     print(f"estimated {ok.sum()} of {len(poses)} poses in {time.perf_counter() - t0:.1f} s; "
           f"{(~ok).sum()} images outside the localizer's domain")

@@ -108,6 +108,7 @@ def test_fit_then_predict_recorded_folders(recorded, tmp_path):
     (["predict", "--data", "{drive}", "--localizer", "{loc}"], "--resize 16x16"),
     (["predict", "--data", "{tmp}/missing", "--localizer", "{loc}"], "--data"),
     (["predict", "--data", "{drive}", "--format", "csv", "--localizer", "{loc}"], "--format"),
+    (["predict", "--data", "{drive}", "--turns", "-1", "--localizer", "{loc}"], "--turns"),
     (["predict", "--data", "{drive}", "--format", "npz", "--out", "{tmp}/p.txt",
       "--localizer", "{loc}"], ".npz"),
     (["fit", "--data", "{drive}", "--features", "sift"], "--features"),
@@ -141,8 +142,8 @@ def test_predict_leaves_out_images_outside_the_domain(recorded, small_localizer,
 
     predict = AppearanceLocalizer.predict
 
-    def some_outside(self, images):
-        poses = predict(self, images)
+    def some_outside(self, images, **options):
+        poses = predict(self, images, **options)
         poses[[0, 5, 7]] = np.nan
         return poses
 
@@ -159,3 +160,22 @@ def test_predict_leaves_out_images_outside_the_domain(recorded, small_localizer,
           "--resize", "16x16", "--format", "npz", "--out", str(tmp_path / "p.npz")])
     with np.load(tmp_path / "p.npz", allow_pickle=False) as z:
         assert np.flatnonzero(np.isnan(z["poses"]).any(axis=1)).tolist() == [0, 5, 7]
+
+
+def test_predict_with_turns_writes_the_turned_estimate(recorded, small_localizer, tmp_path):
+    """--turns 1 writes AppearanceLocalizer.predict(images, turns=1)."""
+    from localization.cli import main
+
+    _, drive, _, _ = recorded
+    out = tmp_path / "t.npz"
+    main(["predict", "--localizer", str(small_localizer), "--data", str(drive),
+          "--resize", "16x16", "--format", "npz", "--turns", "1", "--out", str(out)])
+    main(["predict", "--localizer", str(small_localizer), "--data", str(drive),
+          "--resize", "16x16", "--format", "npz", "--out", str(tmp_path / "p.npz")])
+    with np.load(out, allow_pickle=False) as z, np.load(tmp_path / "p.npz",
+                                                        allow_pickle=False) as p:
+        turned, plain = z["poses"], p["poses"]
+    assert np.array_equal(np.isnan(turned), np.isnan(plain))
+    assert np.array_equal(turned[:, 2], plain[:, 2], equal_nan=True)
+    live = np.isfinite(plain).all(axis=1)
+    assert not np.allclose(turned[live, :2], plain[live, :2])
