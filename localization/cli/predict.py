@@ -29,10 +29,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from localization.cli._args import UsageError
+from localization.cli._args import UsageError, check_non_negative
 from localization.cli._recorded import check_data_options, check_out, load_data
 from localization.recorded import MAX_DIFFERENCE, write_tum
-from localization.turned_views import TURN_CAMERAS
+from localization.turned_views import check_turn_camera
 
 if TYPE_CHECKING:
     from localization.localizer import AppearanceLocalizer
@@ -74,13 +74,14 @@ def load_checked(args: Args) -> tuple[AppearanceLocalizer, Path]:
     if not Path(args.localizer).is_file():
         raise UsageError("localizer", f"no file at {args.localizer} (write one with "
                                 "'appearance-nav fit')")
-    if isinstance(args.turns, bool) or not isinstance(args.turns, int) or args.turns < 0:
-        raise UsageError("turns", f"must be an integer >= 0, got {args.turns!r}")
+    check_non_negative("turns", args.turns)
     out = check_out(args.out, ".npz" if args.format == "npz" else "")
     loc = load_localizer(args.localizer)
-    if args.turns and loc.camera_ not in (None, *TURN_CAMERAS):
-        raise UsageError("turns", f"applies to the cameras {', '.join(TURN_CAMERAS)}, but "
-                                  f"{args.localizer} was fitted for {loc.camera_!r}")
+    if args.turns:
+        try:
+            check_turn_camera(loc.camera_)
+        except ValueError as err:
+            raise UsageError("turns", f"{err} ({args.localizer})") from None
     return loc, out
 
 

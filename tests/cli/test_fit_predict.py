@@ -179,3 +179,20 @@ def test_predict_with_turns_writes_the_turned_estimate(recorded, small_localizer
     assert np.array_equal(turned[:, 2], plain[:, 2], equal_nan=True)
     live = np.isfinite(plain).all(axis=1)
     assert not np.allclose(turned[live, :2], plain[live, :2])
+
+
+def test_predict_refuses_turns_for_a_wide_camera(recorded, small_localizer, tmp_path, capsys):
+    """--turns needs a perspective localizer: a fisheye one is refused, naming --turns."""
+    from localization.cli import main
+    from localization.loading import load_localizer
+
+    loc = load_localizer(small_localizer)
+    loc.camera_ = "fisheye"
+    loc.save(tmp_path / "fisheye.npz")
+    with pytest.raises(SystemExit) as info:
+        main(["predict", "--localizer", str(tmp_path / "fisheye.npz"), "--data",
+              str(recorded[1]), "--resize", "16x16", "--turns", "1",
+              "--out", str(tmp_path / "p.txt")])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert "--turns" in err and "fisheye" in err
