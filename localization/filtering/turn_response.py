@@ -115,12 +115,8 @@ def _yaw_rate(env: Any, pose: ArrayLike, v: float, w: float, steps: int,
     return 0.5 * (rates[0] - rates[1])
 
 
-def _robot_turn_response() -> TurnResponse:
-    return TurnResponse(SPEEDS, TURN_RATES, _ROBOT_TABLE)
-
-
 #: the env's robot (:mod:`envs.robot`), measured as described above
-ROBOT_TURN_RESPONSE = _robot_turn_response()
+ROBOT_TURN_RESPONSE = TurnResponse(SPEEDS, TURN_RATES, _ROBOT_TABLE)
 
 
 def turn_response_for(option: object) -> TurnResponse | None:
@@ -130,5 +126,4 @@ def turn_response_for(option: object) -> TurnResponse | None:
         return option
     if option is None or isinstance(option, (bool, np.bool_)):
         return ROBOT_TURN_RESPONSE if option else None
-    raise TypeError("turn_response must be a bool or an localization.filtering.turn_response.TurnResponse, "
-                    f"got {type(option).__name__}")
+    raise TypeError(f"turn_response must be a bool or a TurnResponse, got {type(option).__name__}")
