@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import platform
 import time
 import warnings
 from collections.abc import Collection
@@ -53,6 +52,7 @@ from localization.workflows.benchmarks.agents_eval import (
     run_episode_task,
     summarize_row,
 )
+from localization.workflows.benchmarks.provenance import provenance
 from localization.workflows.parallel import map_tasks
 from localization.workflows.tracking import fit_city_localizer
 from localization.workflows.training import TrainConfig, train_agent
@@ -275,7 +275,7 @@ def run_agents_bench(args: AgentsBenchConfig) -> dict[str, Any]:
     t0 = time.perf_counter()
     rows = evaluate(args, {name: s["policy"] for name, s in training.items()})
     targets = _targets(rows, training)
-    result = {"args": dataclasses.asdict(args), "machine": platform.platform(),
+    result = {"args": dataclasses.asdict(args), **provenance(),
               "localizer_fit_seconds": fitted, "training": training, "evaluation": rows,
               "evaluation_seconds": round(time.perf_counter() - t0, 1),
               "targets": [{"target": t, "value": v, "limit": lim, "pass": ok}

@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import platform
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -60,6 +59,7 @@ from localization._validation import check_choice
 from localization.filtering.belief import NOISE_MODELS
 from localization.geometry import wrap_angle
 from localization.workflows.benchmarks.appearance_report import markdown
+from localization.workflows.benchmarks.provenance import provenance
 from localization.workflows.tracking import (
     fit_city_localizer,
     nees_band,
@@ -404,7 +404,7 @@ def run_appearance_bench(args: AppearanceBenchConfig) -> dict[str, Any]:
                 bar.update()
     summary = {t: {c: summarize(single[t][c], drives[t][c]) if drives[t][c] else None
                    for c in conditions} for t in trainings}
-    result = {"args": dataclasses.asdict(args), "machine": platform.platform(),
+    result = {"args": dataclasses.asdict(args), **provenance(),
               "seconds": time.perf_counter() - t0, "fit_seconds": fit_seconds,
               "thresholds": THRESHOLDS, "trainings": trainings, "conditions": conditions,
               "summary": summary, "drives": drives, "fit_failures": failures,

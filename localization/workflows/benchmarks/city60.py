@@ -47,7 +47,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import platform
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -69,6 +68,7 @@ from envs.datasets import collect_dataset
 from localization.loading import load_localizer
 from localization.localizer import city_info
 from localization.workflows.benchmarks.coverage import summarize_drives
+from localization.workflows.benchmarks.provenance import provenance
 from localization.workflows.benchmarks.street_features import features_label, localizer_features
 from localization.workflows.tracking import (
     fit_city_localizer,
@@ -343,7 +343,7 @@ def _result(args: City60BenchConfig, records: dict[int, dict[str, Any]],
                              for s in ("belief", "oracle")}}
         summary["all"] = summarize_city(pooled)
     limit = args.max_episode_steps or envs.episode_steps(args.city_size)
-    return {"args": dataclasses.asdict(args), "machine": platform.platform(),
+    return {"args": dataclasses.asdict(args), **provenance(),
             "seconds": time.perf_counter() - t0, "stage_seconds": seconds,
             "summary": summary, "records": {str(c): r for c, r in records.items()},
             "setup": f"cities {','.join(map(str, records)) or 'none'}, {args.city_size:g} m, "

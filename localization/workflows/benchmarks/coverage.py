@@ -50,7 +50,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import platform
 import time
 import warnings
 from collections.abc import Iterator
@@ -71,6 +70,7 @@ from localization.baselines import KernelRegressor, RetrievalRegressor
 from localization.geometry import wrap_angle
 from localization.localizer import AppearanceLocalizer, city_info
 from localization.workflows.benchmarks.coverage_report import THRESHOLDS, markdown
+from localization.workflows.benchmarks.provenance import provenance
 from localization.workflows.benchmarks.street_features import (
     features_label,
     localizer_features,
@@ -251,7 +251,7 @@ def _result(args: CoverageBenchConfig, done: list[int], cameras: list[str],
     summary = {c: {"single": {m: summarize_single(single[c][m]) for m in METHODS},
                    "closed_loop": {k: summarize_drives(v) for k, v in loop[c].items() if v}}
                for c in cameras if all(single[c].values())}
-    return {"args": dataclasses.asdict(args), "machine": platform.platform(),
+    return {"args": dataclasses.asdict(args), **provenance(),
             "seconds": time.perf_counter() - t0, "stage_seconds": seconds,
             "thresholds": THRESHOLDS, "cameras": list(summary), "summary": summary,
             "drives": loop,

@@ -39,7 +39,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import platform
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -54,6 +53,7 @@ import numpy as np
 
 from envs.cameras import make_camera
 from envs.robot import HALF_TRACK, WHEEL_RADIUS
+from localization.workflows.benchmarks.provenance import provenance
 from localization.wrappers import OracleWrapper
 
 TARGET_STEPS_PER_S = 1000.0
@@ -311,8 +311,7 @@ def run_env_bench(args: EnvBenchConfig) -> list[dict[str, Any]]:
     meta = {"args": dataclasses.asdict(args), "dt": probe.dt, "frame_skip": probe.frame_skip,
             "steps": args.steps, "chunk": args.chunk, "gl_renderer": gl_renderer(),
             "mujoco_gl": os.environ.get("MUJOCO_GL"), "lp_num_threads": os.environ.get("LP_NUM_THREADS"),
-            "mujoco": mujoco.__version__,
-            "python": platform.python_version(), "cpu_count": os.cpu_count(),
+            **provenance(), "cpu_count": os.cpu_count(),
             "loadavg": [round(v, 2) for v in os.getloadavg()]}
     probe.close()
     rows = []

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import platform
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -36,6 +35,7 @@ import numpy as np
 
 from envs.datasets import PurePursuit, collect_dataset, drive_route
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer
+from localization.workflows.benchmarks.provenance import provenance
 from localization.workflows.tracking import fit_city_localizer, track_metrics, track_route
 from localization.wrappers import BeliefWrapper
 
@@ -218,7 +218,7 @@ def run_filter_bench(args: FilterBenchConfig) -> dict:
                        "nees_mean": float(np.mean([x["nees_mean"] for x in ms]))}
         print(f"tracking {m:>14}: RMSE {rmse:.3f} m vs dead reckoning {rmse_dr:.2f} m "
               f"(ratio {rmse / rmse_dr:.3f})", flush=True)
-    result = {"args": dataclasses.asdict(args), "machine": platform.platform(),
+    result = {"args": dataclasses.asdict(args), **provenance(),
               "seconds": seconds, "overhead": rows, "tracking": tracking, "runs": runs,
               "tracking_setup": f"city {args.scene_seed}, motion noise {args.motion_noise}, "
                                 f"{args.n_train} route-lane images, PixelPCA, starts {starts}"}

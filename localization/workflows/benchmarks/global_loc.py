@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import platform
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -63,6 +62,7 @@ from localization.geometry import wrap_angle
 from localization.workflows import kidnap_eval as ke
 from localization.workflows.benchmarks import global_agents as ga
 from localization.workflows.benchmarks.global_report import markdown
+from localization.workflows.benchmarks.provenance import provenance
 from localization.workflows.tracking import fit_city_localizer
 
 __all__ = ["LOST_STATUSES", "TARGETS", "GlobalBenchConfig", "run_global_bench"]
@@ -342,7 +342,7 @@ def run_global_bench(args: GlobalBenchConfig) -> dict[str, Any]:
                    "global": None if n != "particles" or not glob else
                    {"n": len(glob), "recovered_within_30": float(np.mean(g_steps <= WITHIN)),
                     "median_steps": float(np.median(g_steps))}} for n in names}
-    result = {"args": dataclasses.asdict(args), "machine": platform.platform(),
+    result = {"args": dataclasses.asdict(args), **provenance(),
               "seconds": time.perf_counter() - t0, "filters": names, "targets": TARGETS,
               "summary": summary, "kidnap_runs": kid, "lookalike_runs": look,
               "nominal_runs": nom, "global_steps": glob,

@@ -44,7 +44,6 @@ import dataclasses
 import itertools
 import json
 import os
-import platform
 import resource
 import subprocess
 import sys
@@ -67,6 +66,7 @@ from localization.workflows.benchmarks.gse_scale import (
     scalable_worker,
     scale_targets,
 )
+from localization.workflows.benchmarks.provenance import provenance
 
 __all__ = ["GSEBenchConfig", "run_gse_bench"]
 
@@ -377,16 +377,8 @@ def run_gse_bench(args: GSEBenchConfig) -> dict[str, Any]:
                   "incremental": incremental_worker}[args.worker_kind]
         Path(args.worker_out).write_text(json.dumps(worker(args), default=float))
         return {}
-    import numpy
-    import scipy
-    import sklearn
-
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], check=False, cwd=ROOT,
-                            capture_output=True, text=True).stdout.strip()
     res: dict[str, Any] = {"args": dataclasses.asdict(args), "meta": {
-        "date": time.strftime("%Y-%m-%d %H:%M:%S"), "git": commit,
-        "python": platform.python_version(), "numpy": numpy.__version__,
-        "scipy": scipy.__version__, "sklearn": sklearn.__version__,
+        "date": time.strftime("%Y-%m-%d %H:%M:%S"), **provenance(),
         "cpu_count": os.cpu_count(), "memory_measure": "ru_maxrss growth during fit, "
         "fresh subprocess per n"}}
     t0 = time.perf_counter()

@@ -53,7 +53,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import platform
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -72,6 +71,7 @@ from envs.kidnapping import PUSH_DISTANCE
 from localization.loading import load_localizer
 from localization.localizer import AppearanceLocalizer
 from localization.workflows.benchmarks.appearance import fit_looks, training_looks
+from localization.workflows.benchmarks.provenance import provenance
 from localization.workflows.benchmarks.robustness_config import (
     AGENTS,
     FILTERS,
@@ -323,7 +323,7 @@ def run_robustness_bench(args: RobustnessConfig) -> dict[str, Any]:
     for task, runs in zip(tasks, results):
         episodes[f"{task.agent}/{task.source}/{task.condition}"] += runs
     summary = {key: _summary(runs) for key, runs in episodes.items()}
-    result = {"args": dataclasses.asdict(args), "machine": platform.platform(),
+    result = {"args": dataclasses.asdict(args), **provenance(),
               "fit_seconds": round(fit_seconds, 1),
               "seconds": round(time.perf_counter() - t0, 1), "summary": summary,
               "targets": targets(summary, args.moving_localizer),

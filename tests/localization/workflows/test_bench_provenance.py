@@ -1,0 +1,30 @@
+"""Benchmark results name what they were measured on (machine, commit, library versions)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from localization.workflows.benchmarks import provenance as prov
+
+
+def test_provenance_names_the_installed_versions() -> None:
+    p = prov.provenance()
+    assert set(p) == {"machine", "python", "git", "versions"}
+    assert p["versions"]["numpy"] == np.__version__
+    assert set(p["versions"]) == set(prov.LIBRARIES)
+    json.dumps(p)  # goes into a result's JSON as it is
+
+
+def test_a_missing_library_reads_none(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(prov, "LIBRARIES", ("numpy", "no-such-distribution-xyz"))
+    versions = prov.library_versions()
+    assert versions == {"numpy": np.__version__, "no-such-distribution-xyz": None}
+
+
+def test_outside_a_checkout_the_commit_is_none(monkeypatch: pytest.MonkeyPatch,
+                                               tmp_path) -> None:
+    monkeypatch.setattr(prov, "ROOT", tmp_path)  # not a git repository
+    assert prov.git_commit() is None
