@@ -147,6 +147,8 @@ def test_quick_run_end_to_end(tmp_path: Path):
     saved = json.loads((tmp_path / "bench_appearance.json").read_text())
     table = (tmp_path / "bench_appearance.md").read_text()
     assert saved["trainings"] == ["daylight", "randomised"]
+    assert saved["args"]["randomised_map"] == "experiences"  # one map per look (stop 66)
+    assert saved["versions"]["numpy"] == np.__version__  # the result names its libraries
     for t in saved["trainings"]:
         for c in ("default", "traffic"):
             s = saved["summary"][t][c]
