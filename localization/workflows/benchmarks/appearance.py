@@ -58,7 +58,7 @@ from envs.datasets import collect_dataset
 from localization._validation import check_choice
 from localization.filtering.belief import NOISE_MODELS
 from localization.geometry import wrap_angle
-from localization.workflows.benchmarks.appearance_report import markdown
+from localization.workflows.benchmarks.appearance_report import map_images_label, markdown
 from localization.workflows.benchmarks.provenance import provenance
 from localization.workflows.tracking import (
     fit_city_localizer,
@@ -415,7 +415,7 @@ def run_appearance_bench(args: AppearanceBenchConfig) -> dict[str, Any]:
                        f"{args.image_size}x{args.image_size} images, "
                        f"motion noise {args.motion_noise}, {features_label(args)} "
                        f"on {args.n_train} lane images per city (the randomised "
-                       f"localizer's map images in {args.randomised_map} conditions); "
+                       f"localizer: {map_images_label(args.randomised_map)}); "
                        f"{args.n_test} test images and {args.n_drives} drive(s) of "
                        f"{args.drive_steps} steps per city and condition, {args.noise} R"
                        + (f"; single images verified against {args.verify} retrieved "

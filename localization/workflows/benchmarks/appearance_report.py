@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["SINGLE_TARGETS", "markdown"]
+__all__ = ["SINGLE_TARGETS", "map_images_label", "markdown"]
 
 #: (training, condition) -> shares within the three thresholds (issue 14)
 SINGLE_TARGETS: dict[tuple[str, str], tuple[float, float, float]] = {
@@ -15,6 +15,17 @@ SINGLE_TARGETS: dict[tuple[str, str], tuple[float, float, float]] = {
 }
 RANDOMISED_TARGET = (0.80, 0.92, 0.99)
 RMSE_FACTOR, MOVING_RMSE_FACTOR, MAX_JUMP = 2.0, 1.5, 1.0
+
+
+def map_images_label(randomised_map: str) -> str:
+    """How the randomised localizer's map images look (``randomised_map``, one of
+    :data:`~localization.workflows.benchmarks.appearance.RANDOMISED_MAPS`), in the words of
+    the reports."""
+    if randomised_map == "experiences":
+        return ("map images per look (daylight, dusk, night, overcast, fog draws), noise "
+                "under randomised conditions")
+    return ("daylight map images, noise under randomised conditions"
+            if randomised_map == "default" else "images in randomised conditions")
 
 
 def single_target(training: str, condition: str) -> tuple[float, float, float] | None:

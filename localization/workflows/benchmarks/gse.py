@@ -66,12 +66,10 @@ from localization.workflows.benchmarks.gse_scale import (
     scalable_worker,
     scale_targets,
 )
-from localization.workflows.benchmarks.provenance import provenance
+from localization.workflows.benchmarks.provenance import ROOT, provenance
 
 __all__ = ["GSEBenchConfig", "run_gse_bench"]
 
-#: the repository (the workers' working directory, the git commit of the report)
-ROOT = Path(__file__).resolve().parents[3]
 
 
 @dataclass

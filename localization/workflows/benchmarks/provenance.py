@@ -15,13 +15,13 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-__all__ = ["LIBRARIES", "provenance"]
+__all__ = ["LIBRARIES", "ROOT", "provenance"]
 
 #: the distributions whose versions a result records
 LIBRARIES = ("numpy", "scipy", "scikit-learn", "mujoco", "gymnasium", "torch", "filterpy",
              "pyamg", "stable-baselines3")
 
-#: the repository (its git commit is the code's)
+#: the repository (its git commit is the code's; the GSE benchmark's workers run there)
 ROOT = Path(__file__).resolve().parents[3]
 
 

@@ -7,6 +7,7 @@ from typing import Any
 from agents.evaluation import METRIC_COLUMNS, metric_cells
 from agents.sources import agent_episode_steps
 from envs.conditions import PRESETS
+from localization.workflows.benchmarks.appearance_report import map_images_label
 
 __all__ = ["DEFAULT_STEPS", "HELD_OUT_CITIES", "MOVING", "TARGETS", "held_out_label", "markdown", "targets"]
 
@@ -21,15 +22,6 @@ TARGETS = {"scripted_nominal": 0.98, "scripted_kidnap_particles": 0.90,
 BELIEFS = ("ekf", "particles")
 #: presets with moving things (the image-free sources run them too: collisions)
 MOVING = tuple(name for name, c in PRESETS.items() if c.vehicles or c.pedestrians)
-
-
-def _map_images(conditions: str) -> str:
-    """How the randomised localizer's map images look."""
-    if conditions == "experiences":
-        return ("map images per look (daylight, dusk, night, overcast, fog draws), noise "
-                "under randomised conditions")
-    return ("daylight map images, noise under randomised conditions" if conditions == "default"
-            else "images in randomised conditions")
 
 
 def _target(name: str, value: float, limit: str, ok: bool) -> dict[str, Any]:
@@ -166,7 +158,7 @@ def markdown(result: dict[str, Any]) -> str:
             f"{_DAYLIGHT_POSES[a.get('daylight_lanes', 'streets')]}) for nominal, "
             f"kidnap and push, randomised conditions "
             f"({a['randomised_features']}, {a['n_train_randomised']} "
-            f"{_map_images(a.get('randomised_map', 'random'))}) for the presets"
+            f"{map_images_label(a.get('randomised_map', 'random'))}) for the presets"
             f"{_MOVING_ON[a.get('moving_localizer', 'randomised')]}; "
             f"{'EKF with divergence detection; ' if a.get('detect_divergence') else ''}"
             f"{result['seconds']:.0f} s ({result['fit_seconds']:.0f} s of fitting, summed "

@@ -148,6 +148,7 @@ def test_quick_run_end_to_end(tmp_path: Path):
     table = (tmp_path / "bench_appearance.md").read_text()
     assert saved["trainings"] == ["daylight", "randomised"]
     assert saved["args"]["randomised_map"] == "experiences"  # one map per look (stop 66)
+    assert "map images per look" in saved["setup"]
     assert saved["versions"]["numpy"] == np.__version__  # the result names its libraries
     for t in saved["trainings"]:
         for c in ("default", "traffic"):
