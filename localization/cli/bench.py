@@ -189,7 +189,7 @@ def _check_appearance_bench(c: AppearanceBenchConfig) -> None:
     check_choice("appearance_first_order", c.first_order, FIRST_ORDER)
     check_choice("appearance_noise", c.noise, NOISE_MODELS)
     check_numbers(c, positive=("image_size", "n_train", "n_drive", "n_components", "n_test",
-                               "n_drives", "drive_steps"),
+                               "n_drives", "drive_steps", "patch_floor"),
                   non_negative=("motion_noise", "seed", "forward_ridge", "verify", "turns"),
                   prefix="appearance_")
     if not (c.verify_margin >= 1.0 and math.isfinite(c.verify_margin)):

@@ -162,6 +162,10 @@ class AppearanceBenchConfig:
                 "'patches' (8 x 8 patches, floor 0.001) chosen over 'channels' on tuning "
                 "cities 11-12 (daylight map, both with 128 components, percent within the three thresholds, at dusk 72 / 94 / 99 against 47 / 65 / 72, at "
                 "night 64 / 86 / 96 against 0 / 0 / 0)"})
+    patch_floor: float = field(default=0.001, metadata={
+        "help": "normalize='patches': added to each patch's standard deviation (pixel values "
+                "in [0, 1]; PixelPCA(patch_floor=...)); a flat patch's sensor noise is scaled "
+                "up to the contrast of a textured one when the floor is far below the noise"})
     first_order: str = field(default="forward", metadata={
         "help": "the first-order terms of GSE's r* (GSERegressor(first_order=...)): frames "
                 "(GSE's recovery Jacobian) or forward (the features' forward model w(theta), "
@@ -275,6 +279,8 @@ def localizer_params(args: AppearanceBenchConfig) -> dict[str, Any]:
     params: dict[str, Any] = {"n_components": args.n_components}
     if args.normalize != "none":
         params["normalize"] = args.normalize
+    if args.normalize == "patches":
+        params["patch_floor"] = args.patch_floor
     return {"features_params": params, "regressor_params": regressor_params(args),
             **noise_params(args)}
 
@@ -297,6 +303,9 @@ def features_label(args: AppearanceBenchConfig) -> str:
     """The feature extractor in the report's words."""
     if args.features == "small_cnn":
         return f"SmallCNN (condition-randomised, other cities; PCA {args.n_components})"
+    if args.normalize == "patches":
+        return (f"PixelPCA({args.n_components}, normalize={args.normalize}, "
+                f"patch_floor={args.patch_floor:g})")
     return f"PixelPCA({args.n_components}, normalize={args.normalize})"
 
 

@@ -128,6 +128,7 @@ def test_targets_are_the_issues():
     ("noise", "robust", "--appearance-noise"),
     ("verify", -1, "--appearance-verify"),
     ("verify_margin", 0.5, "--appearance-verify-margin"),
+    ("patch_floor", 0.0, "--appearance-patch-floor"),
 ])
 def test_bad_options_are_named(field, value, option):
     args = Args(only="appearance", appearance=AppearanceBenchConfig(**{field: value}))
@@ -182,3 +183,13 @@ def test_quick_run_on_the_heteroscedastic_noise(tmp_path: Path):
     for c in result["conditions"]:
         s = result["summary"]["daylight"][c]
         assert s["drives"] == 1 and math.isfinite(s["rmse"]) and math.isfinite(s["nees_mean"])
+
+
+def test_patch_floor_reaches_the_pixel_pca_of_patches_only():
+    from localization.workflows.benchmarks.appearance import features_label, localizer_params
+
+    args = AppearanceBenchConfig(patch_floor=0.02)
+    assert localizer_params(args)["features_params"]["patch_floor"] == 0.02
+    assert "patch_floor=0.02" in features_label(args)
+    plain = AppearanceBenchConfig(normalize="channels", patch_floor=0.02)
+    assert "patch_floor" not in localizer_params(plain)["features_params"]
