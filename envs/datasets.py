@@ -223,7 +223,9 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
         returned are the true poses reached (within a few mm of the sampled ones).
 
     The env's state is changed (teleports, or a reset and a drive for "route"): reset it
-    before running episodes on it. An env made with randomised conditions
+    before running episodes on it. An env made with conditions is reset with ``seed`` first
+    (its look is applied at reset: a fresh env would otherwise show today's). An env made
+    with randomised conditions
     (``conditions="random"``) is reset with ``seed`` and, except for "route" (one drive, one
     look), every sample gets its own look (``env.set_conditions()``), so the dataset covers
     the randomisation.
@@ -255,8 +257,9 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
     bar = tqdm(total=stop - start, desc=f"collect {mode}", disable=not progress, leave=False)
     vary = bool(getattr(base, "randomised_conditions", False))
     redraw = base.set_conditions if vary else (lambda: None)
-    if vary and mode != "route":
-        base.reset(seed=stream)
+    spec = getattr(base, "conditions_spec", None)
+    if mode != "route" and (vary or (spec is not None and not spec.is_default)):
+        base.reset(seed=stream)  # a look is applied at reset: never teleport an unreset env
     if mode == "route":
         pilot = PurePursuit(city.route(), w_max=base.W_MAX)
         obs, info = base.reset(seed=seed, options={"pose": pilot.start_pose()})
