@@ -16,9 +16,11 @@ vehicles and pedestrians move along the streets (:mod:`envs.traffic`).
 - ``"random"``: every episode draws its conditions (:func:`draw_random`) from the episode's
   seed (the same seed gives the same conditions and images; nothing but the seed changes
   them);
-- a dict ``{"preset": name, **fields}``: a preset (default "default", or "random") with
-  fields of :class:`Conditions` overridden (for "random", after every draw), e.g.
-  ``{"preset": "night", "vehicles": 4}``;
+- a dict ``{"preset": name, **fields}``: a preset (default "default", or "random"; or a
+  :class:`Conditions`) with fields of :class:`Conditions` overridden (for "random", after
+  every draw), e.g. ``{"preset": "night", "vehicles": 4}``; with ``"camera": "random"`` a
+  fixed look whose camera effects (exposure, sensor noise, motion blur) every episode draws
+  (:func:`draw_camera`), e.g. a map's images of one light through varying cameras;
 - a :class:`Conditions`.
 
 :func:`parse_conditions` checks any of these and returns a :class:`ConditionsSpec`.
@@ -36,8 +38,8 @@ import numpy as np
 
 from localization._validation import check_array, check_int, check_real
 
-__all__ = ["DEFAULT", "MAX_MOVERS", "PRESETS", "Conditions", "ConditionsSpec", "draw_random",
-           "experience_looks", "parse_conditions"]
+__all__ = ["CAMERAS", "DEFAULT", "MAX_MOVERS", "NO_CAMERA", "PRESETS", "Conditions",
+           "ConditionsSpec", "draw_camera", "draw_random", "experience_looks", "parse_conditions"]
 
 Vec3 = tuple[float, float, float]
 MAX_MOVERS = 16  # vehicles (and pedestrians) at most
@@ -148,6 +150,10 @@ PRESETS: dict[str, Conditions] = {
     "traffic": Conditions(name="traffic", vehicles=6, pedestrians=6),
 }
 FIELDS = tuple(f.name for f in dataclasses.fields(Conditions) if f.name != "name")
+#: the camera fields of a look without camera effects
+NO_CAMERA = {"exposure": 1.0, "noise": 0.0, "motion_blur": 0.0}
+#: the values of ``conditions={"camera": ...}``
+CAMERAS = ("look", "random")
 
 
 @dataclass(frozen=True)
@@ -157,14 +163,20 @@ class ConditionsSpec:
 
     conditions: Conditions | None
     overrides: tuple[tuple[str, Any], ...] = ()
+    camera: str = "look"
 
     @property
     def random(self) -> bool:
         return self.conditions is None
 
     @property
+    def varies(self) -> bool:
+        """Whether episodes draw anything: the whole look, or the camera of a fixed look."""
+        return self.random or self.camera == "random"
+
+    @property
     def is_default(self) -> bool:
-        return self.conditions == DEFAULT
+        return self.conditions == DEFAULT and self.camera == "look"
 
     def _max(self, name: str) -> float:
         if self.conditions is not None:
@@ -185,8 +197,11 @@ class ConditionsSpec:
         return self._max("lamps") > 0
 
     def draw(self, rng: np.random.Generator) -> Conditions:
-        """The conditions of one episode (fixed ones, or a random draw with the overrides)."""
+        """The conditions of one episode (fixed ones, or a random draw with the overrides;
+        ``camera="random"``: a fixed look with the camera effects of :func:`draw_camera`)."""
         if self.conditions is not None:
+            if self.camera == "random":
+                return dataclasses.replace(self.conditions, **{**NO_CAMERA, **draw_camera(rng)})
             return self.conditions
         return dataclasses.replace(draw_random(rng), **dict(self.overrides))
 
@@ -208,14 +223,28 @@ def parse_conditions(spec: object) -> ConditionsSpec:
     if isinstance(spec, str):
         return _preset(spec, {})
     if isinstance(spec, Mapping):
-        allowed = ("preset", *FIELDS)
+        allowed = ("preset", "camera", *FIELDS)
         bad = sorted(str(k) for k in spec if k not in allowed)
         if bad:
             raise ValueError(f"unknown conditions key(s) {bad}; allowed keys: {list(allowed)}")
         preset = spec.get("preset", "default")
-        if not isinstance(preset, str):
-            raise TypeError(f'conditions["preset"] must be a preset name (str), got {preset!r}')
-        return _preset(preset, {k: v for k, v in spec.items() if k != "preset"})
+        camera = spec.get("camera", "look")
+        if camera not in CAMERAS:
+            raise ValueError(f'conditions["camera"] must be one of {list(CAMERAS)}, got '
+                             f"{camera!r}")
+        fields = {k: v for k, v in spec.items() if k not in ("preset", "camera")}
+        if isinstance(preset, Conditions):
+            parsed = ConditionsSpec(_checked(dataclasses.replace(preset, **{
+                k: _check_field(k, v) for k, v in fields.items()})))
+        elif isinstance(preset, str):
+            parsed = _preset(preset, fields)
+        else:
+            raise TypeError(f'conditions["preset"] must be a preset name (str) or a '
+                            f"Conditions, got {preset!r}")
+        if camera == "random" and parsed.random:
+            raise ValueError('conditions["camera"]="random" applies to a fixed look; the '
+                             '"random" preset already draws its camera')
+        return dataclasses.replace(parsed, camera=camera)
     raise TypeError("conditions must be None, a preset name, a dict or a Conditions, got "
                     f"{type(spec).__name__}")
 
@@ -308,11 +337,24 @@ def draw_random(rng: np.random.Generator, family: str | None = None) -> Conditio
     if rng.uniform() < 0.5:
         fields.update(ground=tuple(float(g) for g in rng.uniform(0.75, 1.0, 3)),
                       facades=float(rng.uniform(0.0, 0.5)), season=int(rng.integers(1, 10_000)))
-    if rng.uniform() < 0.5:
-        fields.update(exposure=float(np.exp(rng.uniform(-0.4, 0.4))),
-                      noise=float(rng.uniform(0.0, 0.04)),
-                      motion_blur=float(rng.uniform(0.0, 0.06)))
+    fields.update(draw_camera(rng))
     return dataclasses.replace(base, **fields)
+
+
+def draw_camera(rng: np.random.Generator) -> dict[str, float]:
+    """The camera effects of one random draw: half of the time an exposure of
+    ``exp(U(-0.4, 0.4))``, sensor noise ``U(0, 0.04)`` and motion blur ``U(0, 0.06)``, else
+    none (an empty dict: the look's own camera).
+
+    Returns
+    -------
+    dict — ``{"exposure": ..., "noise": ..., "motion_blur": ...}`` or ``{}``.
+    """
+    if rng.uniform() < 0.5:
+        return {"exposure": float(np.exp(rng.uniform(-0.4, 0.4))),
+                "noise": float(rng.uniform(0.0, 0.04)),
+                "motion_blur": float(rng.uniform(0.0, 0.06))}
+    return {}
 
 
 def experience_looks(seed: int) -> list[Conditions]:

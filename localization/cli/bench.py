@@ -59,6 +59,7 @@ from localization.workflows.benchmarks import BENCHMARKS, benchmark
 from localization.workflows.benchmarks.agents import AgentsBenchConfig
 from localization.workflows.benchmarks.appearance import FEATURES as APPEARANCE_FEATURES
 from localization.workflows.benchmarks.appearance import (
+    MAP_CAMERAS,
     RANDOMISED_MAPS,
     TRAININGS,
     AppearanceBenchConfig,
@@ -186,6 +187,11 @@ def _check_appearance_bench(c: AppearanceBenchConfig) -> None:
     check_choice("appearance_features", c.features, APPEARANCE_FEATURES)
     check_choice("appearance_lanes", c.lanes, LANE_SETS)
     check_choice("appearance_randomised_map", c.randomised_map, RANDOMISED_MAPS)
+    check_choice("appearance_map_camera", c.map_camera, MAP_CAMERAS)
+    if c.map_camera == "random" and c.randomised_map == "random":
+        raise UsageError("appearance_map_camera", "random needs fixed looks "
+                         "(--appearance-randomised-map experiences or default): the random "
+                         "map already draws each image's camera")
     check_choice("appearance_first_order", c.first_order, FIRST_ORDER)
     check_choice("appearance_noise", c.noise, NOISE_MODELS)
     check_numbers(c, positive=("image_size", "n_train", "n_drive", "n_components", "n_test",

@@ -212,7 +212,10 @@ for i, (bad, exc, m) in enumerate([
         ({"sun": [1.0, 2.0]}, V, "sun"), ({"sun": [3.0, 0.0, 0.0]}, V, "sun"),
         ({"sun_direction": [0, 0, 0]}, V, "sun_direction"), ({"exposure": 0.0}, V, "exposure"),
         ({"ground": ["a", "b", "c"]}, T, "ground"), ({"season": 0.5}, T, "season"),
-        ({"preset": "random", "lamps": 5.0}, V, "lamps"), ({1: 2}, V, "conditions")]):
+        ({"preset": "random", "lamps": 5.0}, V, "lamps"), ({1: 2}, V, "conditions"),
+        ({"preset": "dusk", "camera": "random-ish"}, V, "camera"),
+        ({"preset": "random", "camera": "random"}, V, "camera"),
+        ({"preset": envs.conditions.PRESETS["dusk"], "noise": 2.0}, V, "noise")]):
     CASES.append(Case(f"make-conditions-{i}", make(conditions=bad), exc, m))
 CASES += [
     Case("set_conditions-default-env",

@@ -9,7 +9,14 @@ import numpy as np
 import pytest
 
 import envs  # noqa: F401  (registers the env)
-from envs.conditions import DEFAULT, PRESETS, Conditions, draw_random, parse_conditions
+from envs.conditions import (
+    DEFAULT,
+    NO_CAMERA,
+    PRESETS,
+    Conditions,
+    draw_random,
+    parse_conditions,
+)
 from envs.datasets import collect_dataset
 from envs.robot import ROBOT_RADIUS
 from envs.traffic import SPAWN_CLEARANCE
@@ -243,3 +250,42 @@ def test_a_mover_waits_for_the_robot_then_drives_on():
     assert base.traffic.s[0] > s0 + 0.3  # ... not for ever: it drives on
     assert any(hits)  # shoving the robot aside
     env.close()
+
+
+def test_a_fixed_look_through_randomised_cameras():
+    """{"preset": look, "camera": "random"}: the look's light in every image, each image's
+    camera its own draw (draw_camera: none half of the time), the same for the same seed."""
+    look = dataclasses.replace(PRESETS["dusk"], noise=0.03)  # its own camera is replaced
+    spec = parse_conditions({"preset": look, "camera": "random"})
+    assert spec.varies and not spec.random and not spec.is_default
+    draws = [spec.draw(np.random.default_rng(s)) for s in range(40)]
+    assert {dataclasses.replace(d, **NO_CAMERA) for d in draws} == {
+        dataclasses.replace(look, **NO_CAMERA)}
+    assert any(d.noise == 0.0 for d in draws) and any(d.noise > 0.0 for d in draws)
+    assert parse_conditions({"preset": "default", "camera": "random"}).varies
+    assert not parse_conditions({"preset": "dusk"}).varies
+    env = make({"preset": look, "camera": "random"})
+    images, _ = collect_dataset(env, 8, "random", seed=0, progress=False)
+    again, _ = collect_dataset(env, 8, "random", seed=0, progress=False)
+    fixed = make(dataclasses.replace(look, **NO_CAMERA))
+    plain, _ = collect_dataset(fixed, 8, "random", seed=0, progress=False)
+    assert np.array_equal(images, again)
+    same = [np.array_equal(a, b) for a, b in zip(images, plain)]
+    assert any(same) and not all(same)  # some images without camera effects, some with
+    env.close()
+    fixed.close()
+
+
+def test_collect_dataset_shows_a_fresh_envs_look():
+    """A fixed look is applied at reset: collecting from an env never reset used to give
+    today's daylight images for conditions="dusk" (grid and random modes)."""
+    fresh, used, plain = make("dusk"), make("dusk"), make()
+    used.reset(seed=5)
+    for mode in ("random", "grid"):
+        images, _ = collect_dataset(fresh, 3, mode, seed=0, progress=False)
+        again, _ = collect_dataset(used, 3, mode, seed=0, progress=False)
+        daylight, _ = collect_dataset(plain, 3, mode, seed=0, progress=False)
+        assert np.array_equal(images, again)
+        assert images.mean() < daylight.mean() - 20  # dusk, not today's light
+    for env in (fresh, used, plain):
+        env.close()

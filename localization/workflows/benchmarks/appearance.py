@@ -53,7 +53,7 @@ import mujoco
 import numpy as np
 from tqdm import tqdm
 
-from envs.conditions import experience_looks
+from envs.conditions import CAMERAS, experience_looks
 from envs.datasets import collect_dataset
 from localization._validation import check_choice
 from localization.filtering.belief import NOISE_MODELS
@@ -67,7 +67,7 @@ from localization.workflows.tracking import (
     track_streets,
 )
 
-__all__ = ["FEATURES", "RANDOMISED_MAPS", "THRESHOLDS", "AppearanceBenchConfig", "OcclusionRecorder",
+__all__ = ["FEATURES", "MAP_CAMERAS", "RANDOMISED_MAPS", "THRESHOLDS", "AppearanceBenchConfig", "OcclusionRecorder",
            "fit_looks", "map_conditions", "run_appearance_bench", "training_looks"]
 
 #: (metres, degrees) of the visual-localization benchmarks
@@ -76,6 +76,8 @@ TRAININGS = {"daylight": "default", "randomised": "random"}
 #: looks of the randomised localizer's map images (``--appearance-randomised-map``): each
 #: image its own random look, daylight, or one map per look (:func:`map_conditions`)
 RANDOMISED_MAPS = ("random", "default", "experiences")
+#: camera effects of the randomised localizer's map images (``--appearance-map-camera``)
+MAP_CAMERAS = CAMERAS
 
 
 def training_looks(training: str, randomised_map: str) -> tuple[str, str]:
@@ -86,21 +88,31 @@ def training_looks(training: str, randomised_map: str) -> tuple[str, str]:
     return (randomised_map if training == "randomised" else looks), looks
 
 
-def map_conditions(map_looks: str, city: int) -> list[Any]:
+def map_conditions(map_looks: str, city: int, camera: str = "look") -> list[Any]:
     """Conditions of the map's envs: ``[map_looks]``, or for "experiences" today's daylight
     and one draw of each other lighting family of the randomisation
     (:func:`envs.conditions.experience_looks`, seeded by the city): an
-    :class:`~localization.experiences.ExperienceLocalizer`."""
-    return list(experience_looks(city)) if map_looks == "experiences" else [map_looks]
+    :class:`~localization.experiences.ExperienceLocalizer`. ``camera="random"``: each
+    look's images through randomised camera effects (every image its own draw,
+    ``{"preset": look, "camera": "random"}``) instead of the look's own."""
+    check_choice(camera, "camera", CAMERAS)
+    looks = list(experience_looks(city)) if map_looks == "experiences" else [map_looks]
+    if camera == "look":
+        return looks
+    if map_looks == "random":
+        raise ValueError("camera='random' needs fixed looks: the 'random' map already draws "
+                         "each image's camera")
+    return [{"preset": c, "camera": "random"} for c in looks]
 
 
 def fit_looks(make: Any, city: int, map_looks: str, looks: str,
-              calibrate_on_belief: bool = False, **fit: Any) -> Any:
+              calibrate_on_belief: bool = False, map_camera: str = "look", **fit: Any) -> Any:
     """:func:`fit_city_localizer` of ``city`` with its map in ``map_looks``
-    (:func:`map_conditions`) and its noise and calibration drives in ``looks`` (the
-    consistency refined on a drive on the belief if ``calibrate_on_belief``); ``make(c)``
-    makes the city's env in conditions c; the envs are closed after."""
-    maps = [make(c) for c in map_conditions(map_looks, city)]
+    (:func:`map_conditions`, its images' camera ``map_camera``) and its noise and
+    calibration drives in ``looks`` (the consistency refined on a drive on the belief if
+    ``calibrate_on_belief``); ``make(c)`` makes the city's env in conditions c; the envs are
+    closed after."""
+    maps = [make(c) for c in map_conditions(map_looks, city, map_camera)]
     noise_env = maps[0] if map_looks == looks else make(looks)
     try:
         with warnings.catch_warnings():  # GSE's eigen-gap warning on thin tubes of poses
@@ -153,6 +165,11 @@ class AppearanceBenchConfig:
                 "RMSE pooled over them 3.06 -> 0.23 m), random (every image its own look) or "
                 "default (daylight images; its noise and calibration drives stay under "
                 "randomised conditions)"})
+    map_camera: str = field(default="look", metadata={
+        "help": "camera effects of the randomised localizer's map images (experiences or "
+                "default map): look (each look's own: one draw per map, so whether a map "
+                "has seen sensor noise is the luck of its city's draw) or random (every image "
+                "its own draw of exposure, noise and blur, envs.conditions.draw_camera)"})
     n_components: int = field(default=128, metadata={
         "help": "PixelPCA components (small_cnn: PCA components of its embedding); 128 chosen "
                 "over 64 and 256 with normalize='patches' on tuning cities 11-12 (the "
@@ -316,8 +333,9 @@ def fit(args: AppearanceBenchConfig, city: int, training: str) -> Any:
     calibration drives in the training's look, its map images too (the randomised one's
     in ``args.randomised_map``)."""
     map_looks, looks = training_looks(training, args.randomised_map)
+    camera = args.map_camera if training == "randomised" else "look"
     return fit_looks(lambda c: make_env(args, city, c), city, map_looks, looks,
-                     args.calibrate_on_belief, n_train=args.n_train, lanes=args.lanes,
+                     args.calibrate_on_belief, camera, n_train=args.n_train, lanes=args.lanes,
                      n_drive=args.n_drive, seed=args.seed, localizer_params=localizer_params(args))
 
 
@@ -426,7 +444,9 @@ def run_appearance_bench(args: AppearanceBenchConfig) -> dict[str, Any]:
                        f"{args.image_size}x{args.image_size} images, "
                        f"motion noise {args.motion_noise}, {features_label(args)} "
                        f"on {args.n_train} lane images per city (the randomised "
-                       f"localizer: {map_images_label(args.randomised_map)}); "
+                       f"localizer: {map_images_label(args.randomised_map)}"
+                       + (", each map image through its own random camera"
+                          if args.map_camera == "random" else "") + "); "
                        f"{args.n_test} test images and {args.n_drives} drive(s) of "
                        f"{args.drive_steps} steps per city and condition, {args.noise} R"
                        + (f"; single images verified against {args.verify} retrieved "

@@ -129,6 +129,7 @@ def test_targets_are_the_issues():
     ("verify", -1, "--appearance-verify"),
     ("verify_margin", 0.5, "--appearance-verify-margin"),
     ("patch_floor", 0.0, "--appearance-patch-floor"),
+    ("map_camera", "lens", "--appearance-map-camera"),
 ])
 def test_bad_options_are_named(field, value, option):
     args = Args(only="appearance", appearance=AppearanceBenchConfig(**{field: value}))
@@ -193,3 +194,18 @@ def test_patch_floor_reaches_the_pixel_pca_of_patches_only():
     assert "patch_floor=0.02" in features_label(args)
     plain = AppearanceBenchConfig(normalize="channels", patch_floor=0.02)
     assert "patch_floor" not in localizer_params(plain)["features_params"]
+
+
+def test_map_camera_random_draws_each_map_image_its_camera():
+    from localization.workflows.benchmarks.appearance import map_conditions
+
+    looks = map_conditions("experiences", 21)
+    assert map_conditions("experiences", 21, "random") == [
+        {"preset": c, "camera": "random"} for c in looks]
+    assert map_conditions("default", 21, "random") == [{"preset": "default", "camera": "random"}]
+    with pytest.raises(ValueError, match="camera"):
+        map_conditions("random", 21, "random")
+    args = Args(only="appearance", appearance=AppearanceBenchConfig(
+        map_camera="random", randomised_map="random"))
+    with pytest.raises(UsageError, match="--appearance-map-camera"):
+        check(args)
