@@ -57,8 +57,8 @@ from localization.filtering.belief import NOISE_MODELS
 from localization.gse.first_order import FIRST_ORDER
 from localization.workflows.benchmarks import BENCHMARKS, benchmark
 from localization.workflows.benchmarks.agents import AgentsBenchConfig
-from localization.workflows.benchmarks.appearance import FEATURES as APPEARANCE_FEATURES
-from localization.workflows.benchmarks.appearance import (
+from localization.workflows.benchmarks.appearance_config import FEATURES as APPEARANCE_FEATURES
+from localization.workflows.benchmarks.appearance_config import (
     MAP_CAMERAS,
     RANDOMISED_MAPS,
     TRAININGS,

@@ -203,8 +203,6 @@ def test_map_camera_random_draws_each_map_image_its_camera():
     assert map_conditions("experiences", 21, "random") == [
         {"preset": c, "camera": "random"} for c in looks]
     assert map_conditions("default", 21, "random") == [{"preset": "default", "camera": "random"}]
-    with pytest.raises(ValueError, match="camera"):
-        map_conditions("random", 21, "random")
     args = Args(only="appearance", appearance=AppearanceBenchConfig(
         map_camera="random", randomised_map="random"))
     with pytest.raises(UsageError, match="--appearance-map-camera"):
