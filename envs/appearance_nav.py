@@ -17,7 +17,7 @@ from gymnasium import spaces
 from numpy.typing import ArrayLike, NDArray
 
 from envs.cameras import TopDownView, check_image_size, make_camera
-from envs.conditions import Conditions, ConditionsSpec
+from envs.conditions import Conditions
 from envs.conditions_runtime import ConditionsRuntime
 from envs.lookalike import LookalikeCity, generate_lookalike_city
 from envs.motion_model import UnicycleModel, wrap_angle
@@ -342,12 +342,6 @@ class AppearanceNavEnv(gym.Env[Obs, NDArray[np.float32]]):
     def conditions(self) -> Conditions:
         """The conditions of the current episode (:class:`envs.conditions.Conditions`)."""
         return self._conditions.current
-
-    @property
-    def conditions_spec(self) -> ConditionsSpec:
-        """What the env was made with (:class:`envs.conditions.ConditionsSpec`): fixed
-        conditions or a draw per episode."""
-        return self._conditions.spec
 
     @property
     def randomised_conditions(self) -> bool:

@@ -222,12 +222,11 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
         ``POSE_MARGIN``). The poses
         returned are the true poses reached (within a few mm of the sampled ones).
 
-    The env's state is changed (teleports, or a reset and a drive for "route"): reset it
-    before running episodes on it. An env made with conditions is reset with ``seed`` first
-    (its look is applied at reset: a fresh env would otherwise show today's). An env made
-    with randomised conditions
-    (``conditions="random"``) is reset with ``seed`` and, except for "route" (one drive, one
-    look), every sample gets its own look (``env.set_conditions()``), so the dataset covers
+    The env's state is changed (a reset seeded from ``seed``, then teleports, or a drive for
+    "route"): reset it before running episodes on it. The reset also applies the look of an
+    env made with conditions (a fresh env would otherwise show today's). On an env made
+    with randomised conditions (``conditions="random"``) every sample but those of "route"
+    (one drive, one look) gets its own look (``env.set_conditions()``), so the dataset covers
     the randomisation.
 
     Returns
@@ -257,9 +256,8 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
     bar = tqdm(total=stop - start, desc=f"collect {mode}", disable=not progress, leave=False)
     vary = bool(getattr(base, "randomised_conditions", False))
     redraw = base.set_conditions if vary else (lambda: None)
-    spec = getattr(base, "conditions_spec", None)
-    if mode != "route" and (vary or (spec is not None and not spec.is_default)):
-        base.reset(seed=stream)  # a look is applied at reset: never teleport an unreset env
+    if mode != "route":  # seeds the looks and the drive-ins' motion noise; a look is
+        base.reset(seed=stream)  # applied at reset: never teleport an env that was not
     if mode == "route":
         pilot = PurePursuit(city.route(), w_max=base.W_MAX)
         obs, info = base.reset(seed=seed, options={"pose": pilot.start_pose()})
@@ -272,7 +270,6 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
     elif mode == "lanes":
         targets, curvature = lane_poses(city, n, np.random.default_rng(seed),
                                         margin=POSE_MARGIN, **lane_options)
-        base.reset(seed=stream)  # seeds the motion noise of the drive-in
         for i, (target, k) in enumerate(zip(targets[start:stop], curvature[start:stop])):
             images[i], poses[i] = _drive_into(base, target, k, ROLL_STEPS, redraw)
             bar.update()
@@ -281,7 +278,6 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
         targets = coverage_poses(city, n, rng, **{"margin": POSE_MARGIN, **lane_options})
         controls = np.column_stack([rng.uniform(0.0, CRUISE_SPEED, n),
                                     rng.uniform(-base.W_MAX, base.W_MAX, n)])
-        base.reset(seed=stream)  # seeds the motion noise of the drive-in
         for i, (target, (v, w)) in enumerate(zip(targets[start:stop], controls[start:stop])):
             images[i], poses[i] = _drive_in(base, target, v, w, ROLL_STEPS, redraw)
             bar.update()
