@@ -3,21 +3,34 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+CONSTRAINTS := requirements/constraints.txt
 GL := $(VENV)/mujoco_gl
 RUN = MUJOCO_GL=$$(cat $(GL)) $(PY)
 NAV = MUJOCO_GL=$$(cat $(GL)) $(VENV)/bin/appearance-nav
 
-.PHONY: setup demo test bench reproduce clean
+.PHONY: setup demo test bench reproduce clean lock
 
 setup: $(GL)
 
 # torch first, from the CPU wheel on local disk: otherwise a dependency pulls a CUDA build.
-$(STAMP): pyproject.toml
+# Every other version comes from $(CONSTRAINTS), so benchmarks rerun on the same libraries.
+$(STAMP): pyproject.toml $(CONSTRAINTS)
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet torch==2.13.0
-	$(PY) -m pip install --quiet -e '.[dev]'
+	$(PY) -m pip install --quiet -c $(CONSTRAINTS) -e '.[dev]'
 	touch $@
+
+# Newest versions pyproject.toml allows, written to $(CONSTRAINTS); then make test and commit.
+lock:
+	rm -rf $(VENV)-lock
+	$(PYTHON) -m venv $(VENV)-lock
+	$(VENV)-lock/bin/python -m pip install --quiet torch==2.13.0
+	$(VENV)-lock/bin/python -m pip install --quiet -e '.[dev]'
+	sed -n '/^#/p' $(CONSTRAINTS) > $(CONSTRAINTS).new
+	$(VENV)-lock/bin/python -m pip freeze --exclude-editable | grep -v '^torch==' >> $(CONSTRAINTS).new
+	mv $(CONSTRAINTS).new $(CONSTRAINTS)
+	rm -rf $(VENV)-lock
 
 # EGL by default; OSMesa (apt libosmesa6) only when EGL cannot render here.
 $(GL): $(STAMP)
