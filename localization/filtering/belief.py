@@ -42,6 +42,7 @@ from localization.filtering._belief_status import (  # noqa: F401 (LOST_*: the b
     LOST_POSITION_STD,
     StatusMixin,
 )
+from localization.filtering.adaptive_noise import innovation_scale
 from localization.filtering.divergence import monitor_for
 from localization.filtering.ekf import (
     OutOfDomainError,
@@ -111,6 +112,10 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
         The measurement noise: one R per model, or R(x) scaled where the maps are weak
         (the localizer's ``measurement_model(..., noise="heteroscedastic")``; a localizer
         fitted with ``noise_folds >= 2``).
+    adaptive_noise : bool or dict
+        Scale that R up while the accepted innovations are larger than it predicts
+        (:class:`~localization.filtering.adaptive_noise.InnovationScale`; a dict: its
+        settings). False: off.
     free_space : callable, optional
         The map, ``free_space(points (n, 2), margin) -> (n,) bool`` (``city.free_mask``): a
         contact where it has room around the belief makes it "lost". None: no contact makes
@@ -122,11 +127,9 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
     project_contacts : bool
         With ``free_space``: a contradicting contact with a known bearing also moves the
         belief's mean to the nearest pose (in P's metric) at which the map explains it
-        (:func:`~localization.filtering.map_contact.contact_projection`; P kept): the
-        belief of a robot pushed sideways, which coasts parallel to the wall the robot
-        touches, moves to that wall (tuning cities 13-14, pushed, 200 episodes: 0.08
-        contact steps per episode against 0.12, nominal and kidnapped unchanged at 0.00).
-        False: the contact only makes the belief "lost", as before.
+        (:func:`~localization.filtering.map_contact.contact_projection`; P kept): a pushed
+        robot's belief moves to the wall it touches (docs/method.md §13). False: the
+        contact only makes the belief "lost".
     heading_check : float or None
         With the "representation" model: check each update against the image's own psi* by
         the same map (:mod:`~localization.filtering.heading_check`): an image without psi*
@@ -141,10 +144,7 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
     turn_response : bool or TurnResponse
         Predict the turn rate the robot really turns at for U
         (:mod:`localization.filtering.turn_response`; True: the env's robot): ``k U`` becomes
-        ``[k_v v, r(v, w)]``. On the spot the robot turns at 0.7 of a 0.5 rad/s command, and a
-        belief that turns with the command looks around along headings the maps never saw
-        (60 m tuning cities, docs/benchmarks.md §10 stop 64); but the table is a steady
-        state, which biases curves driven with a changing w (method §13.6). False: ``k U``.
+        ``[k_v v, r(v, w)]`` (a steady-state table: method §13.6). False: ``k U``.
 
     Attributes
     ----------
@@ -167,7 +167,8 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
                  contact_motion: str = "blocked", project_contacts: bool = True,
                  heading_check: float | None = None,
                  familiar_novelty: float | None = None,
-                 turn_response: bool | TurnResponse = False) -> None:
+                 turn_response: bool | TurnResponse = False,
+                 adaptive_noise: bool | dict[str, Any] = False) -> None:
         check_localizer(localizer)
         check_choice(noise, "noise", NOISE_MODELS)
         self.contact_motion = check_choice(contact_motion, "contact_motion", CONTACT_MOTIONS)
@@ -179,22 +180,19 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
             inflate_after = check_int(inflate_after, "inflate_after", low=1)
         inflate_factor = check_real(inflate_factor, "inflate_factor", low=1.0)
         self.inflate_after, self.inflate_factor = inflate_after, float(inflate_factor)
-        self.localizer = localizer
-        self.motion_model = motion_model
-        self.measurement = measurement
-        self.gate_probability = gate_probability
-        self.relocalize_after = relocalize_after
+        self.localizer, self.motion_model, self.measurement = localizer, motion_model, measurement
+        self.gate_probability, self.relocalize_after = gate_probability, relocalize_after
         self.alpha = localizer.consistency(measurement) if alpha is None else \
             np.asarray(alpha, dtype=np.float64)
         self.noise = noise
+        self.adaptive = innovation_scale(adaptive_noise)
         self._models: dict[int, Any] = {}  # measurement model per (district) localizer
         self.model = None if callable(getattr(localizer, "local", None)) else \
             self._local(None)[1]
         self.gain = np.asarray(localizer.control_gain_, dtype=np.float64)
         self.ekf: PoseEKF | None = None
         self.last_update: UpdateResult | None = None
-        self.misses = 0
-        self.gated = 0
+        self.misses = self.gated = 0
         self.monitor = monitor_for(detect_divergence)
         if self.monitor is not None and callable(getattr(localizer, "local", None)):
             raise ValueError("detect_divergence is not supported with a localizer of several "
@@ -263,6 +261,8 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
                            gate_probability=self.gate_probability)
         self.misses = self.gated = self._bumped = 0
         self._confirm, self._forced, self._placed = 0, False, True
+        if self.adaptive is not None:
+            self.adaptive.reset()
         if self.monitor is not None:
             self.monitor.clear()
 
@@ -419,7 +419,8 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
             return np.nan, "out_of_domain"
         prior = self.ekf.x.copy(), self.ekf.P.copy()
         try:
-            self.last_update = self.ekf.update(z, self.model)
+            self.last_update = self.ekf.update(z, self.model if self.adaptive is None
+                                               else self.adaptive.wrap(self.model))
         except OutOfDomainError:
             return np.nan, "out_of_domain"
         accepted = self.last_update.accepted
@@ -427,6 +428,9 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
                                                        self.heading_check):
             self.ekf.x, self.ekf.P = prior  # the update read the image as a turn psi* denies
             accepted = False
+        if accepted and self.adaptive is not None:
+            u = self.last_update
+            self.adaptive.record(u.nis, u.dim_z, u.threshold)
         return self.last_update.nis, "accepted" if accepted else "gated"
 
     def run(self, W: ArrayLike, controls: ArrayLike, x0: ArrayLike | None = None,

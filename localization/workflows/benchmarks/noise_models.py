@@ -1,5 +1,6 @@
 """Global against heteroscedastic measurement noise (issue 14): the EKF's mean NEES on the
-same recorded drives with one R per model and with R(theta) (docs/method.md §15.4).
+same recorded drives with one R per model, with R(theta) (docs/method.md §15.4) and with
+R(theta) scaled by the innovations (:mod:`~localization.filtering.adaptive_noise`).
 
     appearance-nav bench --only noise --noise-cities 31,32 --noise-n-drives 4
     # 345 s wall at load 3.9-4.7 (2 cores, shared); the table is in docs/benchmarks.md §8
@@ -12,10 +13,11 @@ scale is learned from (the global R still comes from the noise drive, as without
 Then ``n_drives`` drives of ``drive_steps`` steps (around the route from path points 0,
 600, ...; or street tours with ``lanes="streets"``) are recorded on the true pose under each
 condition preset, and the "representation" belief runs
-over each twice, from the first image (psi*), with ``noise="global"`` and
-``noise="heteroscedastic"``: the same images, controls and start for both. Reported per city
+over each three times, from the first image (psi*), as :data:`FILTERS` says
+(``noise="global"``, ``noise="heteroscedastic"``, and the latter with
+``adaptive_noise=True``): the same images, controls and start for all. Reported per city
 and condition: position RMSE and the mean over drives of the run-averaged NEES against its
-chi-square 95 % band (:func:`~localization.workflows.tracking.nees_band`), for both.
+chi-square 95 % band (:func:`~localization.workflows.tracking.nees_band`), for each.
 """
 
 from __future__ import annotations
@@ -35,11 +37,19 @@ import gymnasium as gym
 import numpy as np
 
 from envs.datasets import drive_route, drive_streets
-from localization.filtering.belief import NOISE_MODELS, BeliefFilter
+from localization.filtering.belief import BeliefFilter
 from localization.geometry import pose_residual
+from localization.workflows.benchmarks.provenance import provenance
 from localization.workflows.tracking import fit_city_localizer, nees_band
 
-__all__ = ["NoiseBenchConfig", "run_noise_bench"]
+__all__ = ["FILTERS", "NoiseBenchConfig", "run_noise_bench"]
+
+#: the compared beliefs: their BeliefFilter noise options
+FILTERS: dict[str, dict[str, Any]] = {
+    "global": {"noise": "global"},
+    "heteroscedastic": {"noise": "heteroscedastic"},
+    "adaptive": {"noise": "heteroscedastic", "adaptive_noise": True},
+}
 
 
 @dataclass
@@ -102,10 +112,10 @@ def record(env: gym.Env, args: NoiseBenchConfig, k: int) -> tuple[np.ndarray, ..
 
 
 def score_drive(loc: Any, motion_model: Any, W: np.ndarray, poses: np.ndarray,
-                controls: np.ndarray, noise: str) -> dict[str, float]:
-    """The belief (``noise``) over one recorded drive from its first image: RMSE, mean NEES,
-    acceptance."""
-    belief = BeliefFilter(loc, motion_model, "representation", noise=noise)
+                controls: np.ndarray, options: dict[str, Any]) -> dict[str, float]:
+    """The belief (BeliefFilter ``options``) over one recorded drive from its first image:
+    RMSE, mean NEES, acceptance."""
+    belief = BeliefFilter(loc, motion_model, "representation", **options)
     means, covs, status = belief.run(W, controls)
     e = np.array([pose_residual(t, m) for t, m in zip(poses, means)])
     nees = np.einsum("ni,nij,nj->n", e, np.linalg.inv(covs), e)
@@ -134,16 +144,16 @@ def run_noise_bench(args: NoiseBenchConfig) -> dict[str, Any]:
         for cond in conditions:
             env = make_env(args, city, cond)
             key = f"{city}/{cond}"
-            runs[key] = {n: [] for n in NOISE_MODELS}
+            runs[key] = {n: [] for n in FILTERS}
             for k in range(args.n_drives):
                 images, poses, controls = record(env, args, k)
                 W = loc.transform(images)
-                for n in NOISE_MODELS:
+                for n, options in FILTERS.items():
                     runs[key][n].append(score_drive(loc, env.unwrapped.motion_model, W, poses,
-                                                    controls, n))
+                                                    controls, options))
             env.close()
-    summary = {key: {n: summarize(r[n]) for n in NOISE_MODELS} for key, r in runs.items()}
-    result = {"args": dataclasses.asdict(args), "seconds": time.perf_counter() - t0,
+    summary = {key: {n: summarize(r[n]) for n in FILTERS} for key, r in runs.items()}
+    result = {"args": dataclasses.asdict(args), **provenance(), "seconds": time.perf_counter() - t0,
               "summary": summary, "runs": runs}
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -154,13 +164,15 @@ def run_noise_bench(args: NoiseBenchConfig) -> dict[str, Any]:
 
 
 def markdown(result: dict[str, Any]) -> str:
-    """A table: per city and condition, RMSE and mean NEES (band) of both noise models."""
-    lines = ["| city / condition | NEES band | global: RMSE, NEES | heteroscedastic: RMSE, NEES |",
-             "|---|---|---|---|"]
+    """A table: per city and condition, RMSE and mean NEES (band) of each belief of the
+    run (those of :data:`FILTERS` it has)."""
+    names = [n for n in FILTERS if all(n in s for s in result["summary"].values())]
+    lines = ["| city / condition | NEES band | "
+             + " | ".join(f"{n}: RMSE, NEES" for n in names) + " |",
+             "|---|---|" + "---|" * len(names)]
     for key, s in result["summary"].items():
-        g, h = s["global"], s["heteroscedastic"]
-        lo, hi = g["nees_band"]
+        lo, hi = s["global"]["nees_band"]
         cell = [f"{r['rmse']:.3f} m, {r['nees_mean']:.2f}{'' if r['in_band'] else ' (out)'}"
-                for r in (g, h)]
-        lines.append(f"| {key} | [{lo:.2f}, {hi:.2f}] | {cell[0]} | {cell[1]} |")
+                for r in (s[n] for n in names)]
+        lines.append(f"| {key} | [{lo:.2f}, {hi:.2f}] | " + " | ".join(cell) + " |")
     return "\n".join(lines)
