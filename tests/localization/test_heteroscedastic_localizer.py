@@ -186,3 +186,8 @@ def test_adaptive_noise_on_the_seeded_drive(hetero, drive):
     assert nees < 0.8 * nees0 and rmse < rmse0 + 0.01
     with pytest.raises(TypeError, match="adaptive_noise"):
         BeliefFilter(loc, F, adaptive_noise="on")
+    from localization.wrappers import BeliefWrapper
+
+    env = BeliefWrapper(make_env(), loc, filter_options={"adaptive_noise": {"rate": 0.2}})
+    assert env.belief.adaptive is not None and env.belief.adaptive.rate == 0.2
+    env.close()

@@ -110,6 +110,10 @@ class AppearanceBenchConfig:
         "help": "the closed loop's measurement noise: global (one R from the noise drive) or "
                 "heteroscedastic (R(theta, w) from 5-fold held-out residuals and the image's "
                 "novelty, docs/method.md section 15.4; five more GSE fits per localizer)"})
+    adaptive_noise: bool = field(default=False, metadata={
+        "help": "the closed loop's R scaled up while the accepted innovations are larger "
+                "than it predicts (BeliefFilter(adaptive_noise=True), docs/method.md section "
+                "15.5)"})
     calibrate_on_belief: bool = field(default=False, metadata={
         "help": "refine each localizer's consistency on a drive on its own belief (in the "
                 "training's look) after the true-pose drive; off: on tuning cities 11-12 it "
