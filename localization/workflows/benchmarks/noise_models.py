@@ -75,6 +75,9 @@ class NoiseBenchConfig:
     first_order: str = field(default="frames", metadata={
         "help": "the first-order terms of GSE's r*: frames or forward (docs/method.md "
                 "section 8.5)"})
+    forward_ridge: float = field(default=0.03, metadata={
+        "help": "first_order=forward: GSERegressor(forward_ridge=...) (the appearance "
+                "benchmark's 0.03)"})
     seed: int = field(default=0, metadata={"help": "seed of the fit and the drives"})
     out_dir: str = field(default="results", metadata={
         "help": "where bench_noise.json/.md go"})
@@ -97,10 +100,17 @@ def fit(args: NoiseBenchConfig, city: int) -> Any:
         loc, _ = fit_city_localizer(
             env, n_train=args.n_train, lanes=args.lanes, n_drive=args.n_drive, seed=args.seed,
             localizer_params={"noise_folds": args.noise_folds, "features_params": params,
-                              "regressor_params": {"first_order": args.first_order}},
+                              "regressor_params": regressor_params(args)},
             calibrate_on_belief=False, measurements=("representation",), quality_steps=0)
     env.close()
     return loc
+
+
+def regressor_params(args: NoiseBenchConfig) -> dict[str, Any]:
+    """The GSERegressor settings: ``first_order``, and ``forward_ridge`` with "forward"."""
+    if args.first_order == "forward":
+        return {"first_order": "forward", "forward_ridge": args.forward_ridge}
+    return {"first_order": args.first_order}
 
 
 def record(env: gym.Env, args: NoiseBenchConfig, k: int) -> tuple[np.ndarray, ...]:
