@@ -5,7 +5,9 @@ R(theta) scaled by the innovations (:mod:`~localization.filtering.adaptive_noise
     appearance-nav bench --only noise --noise-cities 31,32 --noise-n-drives 4
     # 345 s wall at load 3.9-4.7 (2 cores, shared); the table is in docs/benchmarks.md §8
 
-On each city the daylight localizer of the appearance benchmark (:mod:`.appearance`) is
+On each city a daylight localizer with the appearance benchmark's earlier settings
+(:mod:`.appearance` has since moved to 15000 images, PixelPCA(128, normalize="patches") and
+GSE's forward terms; those terms tried here cost consistency, docs/benchmarks.md §8) is
 fitted (:func:`~localization.workflows.tracking.fit_city_localizer` around the route's
 lanes, 64 x 64 images, 6000 of them, PixelPCA(64, normalize="channels"), motion noise 0.1, a
 1500-step noise drive), with ``noise_folds=5``: the K-fold residuals that the heteroscedastic
