@@ -6,12 +6,14 @@ simulator: runs on recorded data).
 - process noise Q from recorded motion (:func:`estimate_process_noise`,
   :func:`estimate_control_gain`, :func:`world_process_noise`);
 - measurement noise R from residuals (:func:`robust_covariance`, :func:`correlation_time`,
-  :func:`inflate`) and the consistency calibration (:func:`calibrate_consistency`);
+  :func:`inflate`) and the consistency calibration (:func:`calibrate_consistency`); R
+  scaled by the filter's own innovations (:class:`InnovationScale`);
 - :class:`BeliefFilter`: the EKF fed with image features by a fitted localizer, with its
   divergence detection (:class:`DivergenceMonitor`);
 - :class:`ParticleBelief`: the multi-hypothesis (particle-filter) belief.
 """
 
+from localization.filtering.adaptive_noise import InnovationScale, ScaledMeasurement
 from localization.filtering.belief import STATUSES, BeliefFilter
 from localization.filtering.calibration import calibrate_consistency
 from localization.filtering.divergence import BELIEF_STATUSES, DivergenceMonitor
@@ -48,12 +50,14 @@ __all__ = [
     "BeliefFilter",
     "DivergenceMonitor",
     "FunctionMeasurement",
+    "InnovationScale",
     "Localizer",
     "MeasurementModel",
     "OutOfDomainError",
     "ParticleBelief",
     "PoseEKF",
     "PoseMeasurement",
+    "ScaledMeasurement",
     "UpdateResult",
     "calibrate_consistency",
     "chi2_band",
