@@ -28,7 +28,7 @@ import numpy as np
 from localization._validation import check_real
 from localization.geometry import Array
 
-__all__ = ["InnovationScale", "ScaledMeasurement"]
+__all__ = ["InnovationScale", "ScaledMeasurement", "innovation_scale"]
 
 
 class ScaledMeasurement:
@@ -40,11 +40,17 @@ class ScaledMeasurement:
         self.model, self.scale = model, float(scale)
 
     def __getattr__(self, name: str) -> Any:
+        if name == "model":  # not set yet (copy, unpickling): no recursion
+            raise AttributeError(name)
         return getattr(self.model, name)
 
     @property
-    def R(self) -> Array:
-        return self.scale * np.asarray(self.model.R, dtype=np.float64)
+    def R(self) -> Any:
+        """``scale`` times the model's R (a callable ``R(x)`` stays one)."""
+        R = self.model.R
+        if callable(R):
+            return lambda x: self.scale * np.asarray(R(x), dtype=np.float64)
+        return self.scale * np.asarray(R, dtype=np.float64)
 
     def _base_R(self, x: Array) -> Array:
         R_at = getattr(self.model, "R_at", None)

@@ -3,6 +3,8 @@ consistent where a too-small R is not, and the belief option's inputs."""
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -12,7 +14,7 @@ from localization.filtering.adaptive_noise import (
     ScaledMeasurement,
     innovation_scale,
 )
-from localization.filtering.ekf import PoseEKF, PoseMeasurement, pose_residual
+from localization.filtering.ekf import FunctionMeasurement, PoseEKF, PoseMeasurement, pose_residual
 
 R_MODEL = np.diag([0.1, 0.1, 0.03]) ** 2
 Q = np.diag([0.01, 0.01, 0.005]) ** 2
@@ -51,6 +53,13 @@ def test_scaled_model_weighs_by_the_scaled_R_and_gates_by_the_model_R():
     assert r_scaled.nis == pytest.approx(r_plain.nis)  # the gate's NIS: the model's R
     assert not np.allclose(scaled.x, plain.x)
     np.testing.assert_allclose(ScaledMeasurement(base, 4.0).R, 4.0 * R_MODEL)
+    varying = FunctionMeasurement(lambda x: x, lambda x: np.eye(3), lambda x: (1 + x[0] ** 2) * R_MODEL)
+    scaled = ScaledMeasurement(varying, 2.0)
+    x = np.array([1.0, 0.0, 0.0])
+    np.testing.assert_allclose(scaled.R_at(x), 4.0 * R_MODEL)  # 2 x (1 + 1) R
+    np.testing.assert_allclose(scaled.R(x), 4.0 * R_MODEL)
+    np.testing.assert_allclose(scaled.gate_R(x), 2.0 * R_MODEL)
+    assert copy.copy(scaled).scale == 2.0
 
 
 def _nees(adaptive: bool, seed: int) -> float:
