@@ -44,7 +44,7 @@ from localization.geometry import pose_residual
 from localization.workflows.benchmarks.provenance import provenance
 from localization.workflows.tracking import fit_city_localizer, nees_band
 
-__all__ = ["FILTERS", "NoiseBenchConfig", "run_noise_bench"]
+__all__ = ["FILTERS", "NoiseBenchConfig", "plot_nees", "run_noise_bench"]
 
 #: the compared beliefs: their BeliefFilter noise options
 FILTERS: dict[str, dict[str, Any]] = {
@@ -171,8 +171,45 @@ def run_noise_bench(args: NoiseBenchConfig) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     (out / "bench_noise.json").write_text(json.dumps(result, indent=2))
     (out / "bench_noise.md").write_text(markdown(result) + "\n")
+    plot_nees(result, out / "bench_noise.png")
     print(markdown(result))
     return result
+
+
+def plot_nees(result: dict[str, Any], path: str | Path) -> Path:
+    """A PNG of the run: per city and condition, each belief's mean NEES against the
+    chi-square 95 % band (shaded; log scale) and its position RMSE."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    groups = list(result["summary"])
+    names = [n for n in FILTERS if all(n in s for s in result["summary"].values())]
+    y = np.arange(len(groups))
+    height = 0.8 / len(names)
+    fig, (ax_nees, ax_rmse) = plt.subplots(1, 2, figsize=(10, 0.35 * len(groups) + 1.5),
+                                           sharey=True)
+    lo, hi = result["summary"][groups[0]][names[0]]["nees_band"]
+    ax_nees.axvspan(lo, hi, color="0.9", label="95 % band")
+    for i, n in enumerate(names):
+        offset = y + (i - (len(names) - 1) / 2) * height
+        s = [result["summary"][g][n] for g in groups]
+        label = {"global": "global R", "heteroscedastic": "R(θ, w)",
+                 "adaptive": "R(θ, w) scaled by the innovations"}.get(n, n)
+        ax_nees.barh(offset, [r["nees_mean"] for r in s], height, label=label)
+        ax_rmse.barh(offset, [r["rmse"] for r in s], height)
+    ax_nees.set_xscale("log")
+    ax_nees.set_xlabel("mean NEES (3 dof)")
+    ax_rmse.set_xlabel("position RMSE (m)")
+    ax_nees.set_yticks(y, groups)
+    ax_nees.invert_yaxis()
+    fig.legend(*ax_nees.get_legend_handles_labels(), loc="upper center", ncol=4, fontsize=8)
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.5 / fig.get_figheight()))
+    path = Path(path)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
 
 
 def markdown(result: dict[str, Any]) -> str:

@@ -41,3 +41,14 @@ def test_registered_for_bench_only_noise():
     assert "noise" in BENCHMARKS
     config, run = benchmark("noise")
     assert config is NoiseBenchConfig and run is noise_models.run_noise_bench
+
+
+def test_figure_of_hand_made_runs(tmp_path):
+    from localization.workflows.benchmarks.noise_models import FILTERS, plot_nees
+
+    runs = [{"rmse": 0.1, "nees_mean": 4.0, "accepted": 1.0},
+            {"rmse": 0.3, "nees_mean": 12.0, "accepted": 0.5}]
+    result = {"summary": {key: {n: summarize(runs) for n in FILTERS}
+                          for key in ("31/default", "31/fog")}}
+    path = plot_nees(result, tmp_path / "nees.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
