@@ -256,8 +256,10 @@ def collect_dataset(env: gym.Env, n: int, mode: str = "random", seed: int = 0, n
     bar = tqdm(total=stop - start, desc=f"collect {mode}", disable=not progress, leave=False)
     vary = bool(getattr(base, "randomised_conditions", False))
     redraw = base.set_conditions if vary else (lambda: None)
-    if mode != "route":  # seeds the looks and the drive-ins' motion noise; a look is
-        base.reset(seed=stream)  # applied at reset: never teleport an env that was not
+    # one seeded reset before teleporting: it applies the env's look (a fresh env shows
+    # today's light until reset) and seeds the looks and the drive-ins' motion noise
+    if mode != "route":
+        base.reset(seed=stream)
     if mode == "route":
         pilot = PurePursuit(city.route(), w_max=base.W_MAX)
         obs, info = base.reset(seed=seed, options={"pose": pilot.start_pose()})

@@ -52,6 +52,9 @@ FILTERS: dict[str, dict[str, Any]] = {
     "heteroscedastic": {"noise": "heteroscedastic"},
     "adaptive": {"noise": "heteroscedastic", "adaptive_noise": True},
 }
+#: their names in the figure
+LABELS = {"global": "global R", "heteroscedastic": "R(θ, w)",
+          "adaptive": "R(θ, w) scaled by the innovations"}
 
 
 @dataclass
@@ -176,6 +179,11 @@ def run_noise_bench(args: NoiseBenchConfig) -> dict[str, Any]:
     return result
 
 
+def filters_of(result: dict[str, Any]) -> list[str]:
+    """The beliefs of :data:`FILTERS` that every group of the run has, in that order."""
+    return [n for n in FILTERS if all(n in s for s in result["summary"].values())]
+
+
 def plot_nees(result: dict[str, Any], path: str | Path) -> Path:
     """A PNG of the run: per city and condition, each belief's mean NEES against the
     chi-square 95 % band (shaded; log scale) and its position RMSE."""
@@ -185,7 +193,7 @@ def plot_nees(result: dict[str, Any], path: str | Path) -> Path:
     import matplotlib.pyplot as plt
 
     groups = list(result["summary"])
-    names = [n for n in FILTERS if all(n in s for s in result["summary"].values())]
+    names = filters_of(result)
     y = np.arange(len(groups))
     height = 0.8 / len(names)
     fig, (ax_nees, ax_rmse) = plt.subplots(1, 2, figsize=(10, 0.35 * len(groups) + 1.5),
@@ -195,9 +203,7 @@ def plot_nees(result: dict[str, Any], path: str | Path) -> Path:
     for i, n in enumerate(names):
         offset = y + (i - (len(names) - 1) / 2) * height
         s = [result["summary"][g][n] for g in groups]
-        label = {"global": "global R", "heteroscedastic": "R(θ, w)",
-                 "adaptive": "R(θ, w) scaled by the innovations"}.get(n, n)
-        ax_nees.barh(offset, [r["nees_mean"] for r in s], height, label=label)
+        ax_nees.barh(offset, [r["nees_mean"] for r in s], height, label=LABELS[n])
         ax_rmse.barh(offset, [r["rmse"] for r in s], height)
     ax_nees.set_xscale("log")
     ax_nees.set_xlabel("mean NEES (3 dof)")
@@ -215,7 +221,7 @@ def plot_nees(result: dict[str, Any], path: str | Path) -> Path:
 def markdown(result: dict[str, Any]) -> str:
     """A table: per city and condition, RMSE and mean NEES (band) of each belief of the
     run (those of :data:`FILTERS` it has)."""
-    names = [n for n in FILTERS if all(n in s for s in result["summary"].values())]
+    names = filters_of(result)
     lines = ["| city / condition | NEES band | "
              + " | ".join(f"{n}: RMSE, NEES" for n in names) + " |",
              "|---|---|" + "---|" * len(names)]
