@@ -5,8 +5,8 @@ monitor's restarts (docs/method.md §13, §13.1).
 
 The host class provides ``ekf``, ``misses``, ``gated``, ``belief_status``, ``monitor``,
 ``localizer``, ``motion_model``, ``last_update``, ``_trial``, ``_refused``, ``_repeat_view``,
-``_placed``, ``_forced``, ``_bumped``, ``_lost_now`` / ``_doubtful_now``, ``_start``,
-``_from_image`` and ``_measurement``.
+``_placed``, ``_forced``, ``_bumped``, ``_lost_now`` / ``_doubtful_now``, ``inflate_factor``,
+``_start``, ``_from_image`` and ``_measurement``.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ __all__ = ["RecoveryMixin"]
 
 #: a step's control k U (2,) and its extra process noise (3, 3) or None (BeliefFilter._step_motion)
 Motion = tuple[Array, Array | None]
+MAX_HEADING_STD = 0.5  # rad: heading inflation stops there
 
 
 class RecoveryMixin:
@@ -36,6 +37,7 @@ class RecoveryMixin:
     localizer: Any
     motion_model: Any
     last_update: Any
+    inflate_factor: float
     _trial: RestartTrial | None
     _refused: ViewOdometer | None
     _repeat_view: bool
@@ -84,6 +86,18 @@ class RecoveryMixin:
         if verdict.drift is not None:
             self._widen_towards(verdict.drift)
         return status
+
+    def _inflate_heading(self) -> None:
+        """The heading variance times ``inflate_factor``, up to ``MAX_HEADING_STD`` squared
+        (a gate that rejects the truth after a heading kick keeps rejecting it)."""
+        assert self.ekf is not None
+        P = self.ekf.P
+        f = min(self.inflate_factor, MAX_HEADING_STD ** 2 / P[2, 2])
+        if f > 1.0:
+            d = np.array([1.0, 1.0, np.sqrt(f)])
+            self.ekf.P = d[:, None] * P * d[None, :]
+            if getattr(self.ekf, "P_xb", None) is not None:  # a congruence: Pa stays PSD
+                self.ekf.P_xb = d[:, None] * self.ekf.P_xb
 
     def _widen_towards(self, pose: Array) -> None:
         """``P = P + d d^T``, ``d = pose - x`` (yaw wrapped): the images agree on a place a

@@ -35,7 +35,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from localization._validation import check_bool, check_choice, check_int, check_real
-from localization.filtering._belief_recovery import RecoveryMixin
+from localization.filtering._belief_recovery import (  # noqa: F401 (MAX_*: the belief's)
+    MAX_HEADING_STD,
+    RecoveryMixin,
+)
 from localization.filtering._belief_status import (  # noqa: F401 (LOST_*: the belief's names)
     LOST_AFTER_MISSES,
     LOST_HEADING_STD,
@@ -71,6 +74,7 @@ from localization.filtering.map_contact import (
     contact_kinds,
     contact_projection,
 )
+from localization.filtering.measurement_bias import make_ekf, measurement_bias_for
 from localization.filtering.particle_start import DEFAULT_P0
 from localization.filtering.recorded_run import run_recorded
 from localization.filtering.restart_trial import RestartTrial, ViewOdometer
@@ -80,7 +84,6 @@ from localization.geometry import Array
 STATUSES = ("initial", "accepted", "gated", "out_of_domain", "relocalized", "reverted")
 NOISE_MODELS = ("global", "heteroscedastic")
 RESET_MODES = ("image", "global")
-MAX_HEADING_STD = 0.5  # rad: heading inflation stops there
 
 
 class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
@@ -116,6 +119,10 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
         Scale that R up while the accepted innovations are larger than it predicts
         (:class:`~localization.filtering.adaptive_noise.InnovationScale`; a dict: its
         settings). False: off.
+    measurement_bias : bool or dict
+        Carry a persistent (AR(1)) bias of the measurement beside the pose
+        (:mod:`~localization.filtering.measurement_bias`; a dict: ``rho``, ``phi``): maps
+        that err in runs do not make the belief over-confident. False: off.
     free_space : callable, optional
         The map, ``free_space(points (n, 2), margin) -> (n,) bool`` (``city.free_mask``): a
         contact where it has room around the belief makes it "lost". None: no contact makes
@@ -168,7 +175,8 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
                  heading_check: float | None = None,
                  familiar_novelty: float | None = None,
                  turn_response: bool | TurnResponse = False,
-                 adaptive_noise: bool | dict[str, Any] = False) -> None:
+                 adaptive_noise: bool | dict[str, Any] = False,
+                 measurement_bias: bool | dict[str, Any] = False) -> None:
         check_localizer(localizer)
         check_choice(noise, "noise", NOISE_MODELS)
         self.contact_motion = check_choice(contact_motion, "contact_motion", CONTACT_MOTIONS)
@@ -186,6 +194,7 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
             np.asarray(alpha, dtype=np.float64)
         self.noise = noise
         self.adaptive = innovation_scale(adaptive_noise)
+        self.bias = measurement_bias_for(measurement_bias)
         self._models: dict[int, Any] = {}  # measurement model per (district) localizer
         self.model = None if callable(getattr(localizer, "local", None)) else \
             self._local(None)[1]
@@ -257,8 +266,8 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
         return self.localizer.process_noise(x, alpha=self.alpha)
 
     def _start(self, x0: ArrayLike, P0: ArrayLike) -> None:
-        self.ekf = PoseEKF(self.motion_model, self._Q, x0, P0,
-                           gate_probability=self.gate_probability)
+        self.ekf = make_ekf(self.motion_model, self._Q, x0, P0, self.gate_probability,
+                            self.bias)
         self.misses = self.gated = self._bumped = 0
         self._confirm, self._forced, self._placed = 0, False, True
         if self.adaptive is not None:
@@ -354,11 +363,7 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
         nis, status = self._update(w)
         self.gated = self.gated + 1 if status == "gated" else 0
         if self.inflate_after is not None and self.gated >= self.inflate_after:
-            P = self.ekf.P
-            f = min(self.inflate_factor, MAX_HEADING_STD ** 2 / P[2, 2])
-            if f > 1.0:
-                d = np.array([1.0, 1.0, np.sqrt(f)])
-                self.ekf.P = d[:, None] * P * d[None, :]
+            self._inflate_heading()
         if status == "accepted":
             self.misses = 0
         else:
@@ -417,7 +422,7 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
             view.measure(w, "pose")  # psi* by the same map: the heading check's reference
         if not (np.all(np.isfinite(z)) and (psi is None or np.all(np.isfinite(psi)))):
             return np.nan, "out_of_domain"
-        prior = self.ekf.x.copy(), self.ekf.P.copy()
+        prior = self.ekf.snapshot()
         try:
             self.last_update = self.ekf.update(z, self.model if self.adaptive is None
                                                else self.adaptive.wrap(self.model))
@@ -426,7 +431,7 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
         accepted = self.last_update.accepted
         if accepted and psi is not None and turns_away(prior[0][2], self.ekf.x[2], psi[2],
                                                        self.heading_check):
-            self.ekf.x, self.ekf.P = prior  # the update read the image as a turn psi* denies
+            self.ekf.restore(prior)  # the update read the image as a turn psi* denies
             accepted = False
         if accepted and self.adaptive is not None:
             u = self.last_update

@@ -81,7 +81,7 @@ class UpdateResult:
 
 
 @lru_cache(maxsize=64)
-def _gate_threshold(gate_probability: float | None, dim_z: int) -> float:
+def gate_threshold(gate_probability: float | None, dim_z: int) -> float:
     """``chi2.ppf(gate_probability, dim_z)`` (cached), ``inf`` when gating is disabled."""
     return np.inf if gate_probability is None else float(chi2.ppf(gate_probability, dim_z))
 
@@ -357,7 +357,7 @@ class PoseEKF(ExtendedKalmanFilter):
             nis = float(y @ cho_solve(cho_factor(S), y))
         except LinAlgError:
             raise ValueError("innovation covariance S = H P H^T + R is not positive definite") from None
-        threshold = _gate_threshold(self.gate_probability, dim_z)
+        threshold = gate_threshold(self.gate_probability, dim_z)
         if nis > threshold:
             return UpdateResult(nis=nis, accepted=False, dim_z=dim_z, threshold=threshold)
         self.dim_z = dim_z
@@ -366,6 +366,14 @@ class PoseEKF(ExtendedKalmanFilter):
         self.P = 0.5 * (self.P + self.P.T)
         self.x_post, self.P_post = self.x.copy(), self.P.copy()
         return UpdateResult(nis=nis, accepted=True, dim_z=dim_z, threshold=threshold)
+
+    def snapshot(self) -> tuple[Array, ...]:
+        """Copies of ``x`` and ``P`` (a subclass adds its own state), for :meth:`restore`."""
+        return self.x.copy(), self.P.copy()
+
+    def restore(self, state: tuple[Array, ...]) -> None:
+        """Back to a :meth:`snapshot` (e.g. an update undone)."""
+        self.x, self.P = state[0].copy(), state[1].copy()
 
     def nees(self, true_pose: ArrayLike) -> float:
         """Normalized estimation error squared ``e^T P^-1 e``, ``e = true_pose - x`` (yaw wrapped)."""

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from localization._validation import check_real
-from localization.filtering.ekf import _gate_threshold
+from localization.filtering.ekf import gate_threshold
 from localization.geometry import Array, wrap_angle
 
 __all__ = ["AGREE_PROBABILITY", "FamiliarStartMixin", "ImageStart", "check_familiar_novelty",
@@ -70,7 +70,7 @@ def start_agrees(x: Array, P: Array, x0: Array, P0: Array,
     d = np.asarray(x0, dtype=np.float64) - np.asarray(x, dtype=np.float64)
     d[2] = wrap_angle(d[2])
     d2 = float(d @ np.linalg.solve(np.asarray(P) + np.asarray(P0), d))
-    return d2 <= _gate_threshold(gate_probability or AGREE_PROBABILITY, 3)
+    return d2 <= gate_threshold(gate_probability or AGREE_PROBABILITY, 3)
 
 
 class FamiliarStartMixin:
