@@ -7,7 +7,8 @@ simulator: runs on recorded data).
   :func:`estimate_control_gain`, :func:`world_process_noise`);
 - measurement noise R from residuals (:func:`robust_covariance`, :func:`correlation_time`,
   :func:`inflate`) and the consistency calibration (:func:`calibrate_consistency`); R
-  scaled by the filter's own innovations (:class:`InnovationScale`);
+  scaled by the filter's own innovations (:class:`InnovationScale`); a persistent
+  measurement bias carried beside the pose (:class:`BiasedPoseEKF`, :class:`MeasurementBias`);
 - :class:`BeliefFilter`: the EKF fed with image features by a fitted localizer, with its
   divergence detection (:class:`DivergenceMonitor`);
 - :class:`ParticleBelief`: the multi-hypothesis (particle-filter) belief.
@@ -29,6 +30,7 @@ from localization.filtering.ekf import (
     numerical_jacobian,
 )
 from localization.filtering.localizer_protocol import Localizer
+from localization.filtering.measurement_bias import BiasedPoseEKF, MeasurementBias
 from localization.filtering.measurement_noise import (
     consistency_inflation,
     correlation_time,
@@ -48,10 +50,12 @@ __all__ = [
     "PARTICLE_STATUSES",
     "STATUSES",
     "BeliefFilter",
+    "BiasedPoseEKF",
     "DivergenceMonitor",
     "FunctionMeasurement",
     "InnovationScale",
     "Localizer",
+    "MeasurementBias",
     "MeasurementModel",
     "OutOfDomainError",
     "ParticleBelief",

@@ -115,6 +115,10 @@ class AppearanceBenchConfig:
                 "than it predicts (BeliefFilter(adaptive_noise=True), docs/method.md section "
                 "15.5); off: on tuning cities 11-12 no preset came into the NEES band and a "
                 "traffic drive was lost (docs/benchmarks.md section 9, stop 68)"})
+    measurement_bias: bool = field(default=False, metadata={
+        "help": "the closed loop's belief carries a persistent (AR(1)) bias of the "
+                "measurement (BeliefFilter(measurement_bias=True), docs/method.md section "
+                "15.6)"})
     calibrate_on_belief: bool = field(default=False, metadata={
         "help": "refine each localizer's consistency on a drive on its own belief (in the "
                 "training's look) after the true-pose drive; off: on tuning cities 11-12 it "

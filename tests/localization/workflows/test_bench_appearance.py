@@ -94,11 +94,16 @@ def test_heteroscedastic_noise_fits_the_folds_and_reaches_the_drives(monkeypatch
     monkeypatch.setattr(appearance, "track_route", fake_track)
     with pytest.raises(RuntimeError, match="stop here"):
         appearance.closed_loop(None, None, "route", 10, 0, 1, args.noise)
-    assert seen["filter_options"] == {"noise": "heteroscedastic", "adaptive_noise": False}
+    assert seen["filter_options"] == {"noise": "heteroscedastic", "adaptive_noise": False,
+                                      "measurement_bias": False}
     assert set(seen["filter_options"]) <= set(FILTER_OPTIONS["ekf"])  # the wrapper takes it
     with pytest.raises(RuntimeError, match="stop here"):  # --appearance-adaptive-noise
         appearance.closed_loop(None, None, "route", 10, 0, 1, "global", True)
-    assert seen["filter_options"] == {"noise": "global", "adaptive_noise": True}
+    assert seen["filter_options"] == {"noise": "global", "adaptive_noise": True,
+                                      "measurement_bias": False}
+    with pytest.raises(RuntimeError, match="stop here"):  # --appearance-measurement-bias
+        appearance.closed_loop(None, None, "route", 10, 0, 1, "global", False, True)
+    assert seen["filter_options"]["measurement_bias"] is True
 
 
 def test_experience_maps_are_daylight_and_a_draw_of_each_other_family():
