@@ -45,7 +45,7 @@ from localization.geometry import pose_residual
 from localization.workflows.benchmarks.provenance import provenance
 from localization.workflows.tracking import fit_city_localizer, nees_band
 
-__all__ = ["FILTERS", "NoiseBenchConfig", "plot_nees", "run_noise_bench"]
+__all__ = ["FILTERS", "NoiseBenchConfig", "plot_nees", "run_noise_bench", "target_counts"]
 
 #: the compared beliefs: their BeliefFilter noise options
 FILTERS: dict[str, dict[str, Any]] = {
@@ -221,9 +221,34 @@ def plot_nees(result: dict[str, Any], path: str | Path) -> Path:
     return path
 
 
+def target_counts(result: dict[str, Any]) -> dict[str, dict[str, int]]:
+    """Per belief, the issue's target read two ways: groups (city, condition: the mean NEES
+    of its drives) and single drives (each drive's run-averaged NEES against the band of
+    one value) in the band, and how many of the global belief's out-of-band ones are inside."""
+    lo, hi = nees_band(1)
+    summary, runs = result["summary"], result["runs"]
+    groups_out = [g for g, s in summary.items() if not s["global"]["in_band"]]
+    drives_out = [(g, i) for g, r in runs.items() for i, d in enumerate(r["global"])
+                  if not lo <= d["nees_mean"] <= hi]
+
+    def inside(n: str, g: str, i: int) -> bool:
+        return bool(lo <= runs[g][n][i]["nees_mean"] <= hi)
+
+    return {n: {"groups": len(summary), "groups_in_band": sum(s[n]["in_band"]
+                                                              for s in summary.values()),
+                "global_out_groups": len(groups_out),
+                "global_out_groups_inside": sum(summary[g][n]["in_band"] for g in groups_out),
+                "drives": sum(len(r[n]) for r in runs.values()),
+                "drives_in_band": sum(inside(n, g, i) for g, r in runs.items()
+                                      for i in range(len(r[n]))),
+                "global_out_drives": len(drives_out),
+                "global_out_drives_inside": sum(inside(n, g, i) for g, i in drives_out)}
+            for n in filters_of(result)}
+
+
 def markdown(result: dict[str, Any]) -> str:
     """A table: per city and condition, RMSE and mean NEES (band) of each belief of the
-    run (those of :data:`FILTERS` it has)."""
+    run (those of :data:`FILTERS` it has); then :func:`target_counts`."""
     names = filters_of(result)
     lines = ["| city / condition | NEES band | "
              + " | ".join(f"{n}: RMSE, NEES" for n in names) + " |",
@@ -233,4 +258,15 @@ def markdown(result: dict[str, Any]) -> str:
         cell = [f"{r['rmse']:.3f} m, {r['nees_mean']:.2f}{'' if r['in_band'] else ' (out)'}"
                 for r in (s[n] for n in names)]
         lines.append(f"| {key} | [{lo:.2f}, {hi:.2f}] | " + " | ".join(cell) + " |")
+    if "runs" not in result:  # a summary only: no drives to count
+        return "\n".join(lines)
+    lo, hi = nees_band(1)
+    head = ("| belief | groups in band | of the global's out-of-band groups, inside | "
+            f"drives in band [{lo:.2f}, {hi:.2f}] | of the global's out-of-band drives, inside |")
+    lines += ["", head, "|---|---|---|---|---|"]
+    for n, c in target_counts(result).items():
+        lines.append(f"| {n} | {c['groups_in_band']} / {c['groups']} | "
+                     f"{c['global_out_groups_inside']} / {c['global_out_groups']} | "
+                     f"{c['drives_in_band']} / {c['drives']} | "
+                     f"{c['global_out_drives_inside']} / {c['global_out_drives']} |")
     return "\n".join(lines)

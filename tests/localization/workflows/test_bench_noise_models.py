@@ -52,3 +52,28 @@ def test_figure_of_hand_made_runs(tmp_path):
                           for key in ("31/default", "31/fog")}}
     path = plot_nees(result, tmp_path / "nees.png")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_target_counts_of_hand_made_runs():
+    """Groups by the mean of their drives (band [1.10, 5.83] for 4), drives one by one
+    (band [0.22, 9.35]): a group out with the global R because one drive of four is at 15."""
+    from localization.workflows.benchmarks.noise_models import markdown, target_counts
+
+    def group(nees):
+        return [{"rmse": 0.1, "nees_mean": v, "accepted": 1.0} for v in nees]
+
+    runs = {"31/default": {"global": group([3, 3, 3, 15]), "bias": group([3, 3, 3, 8]),
+                           "heteroscedastic": group([3, 3, 3, 15]),
+                           "adaptive": group([3, 3, 3, 10])},
+            "31/fog": {n: group([2, 2, 2, 2]) for n in ("global", "bias", "heteroscedastic",
+                                                         "adaptive")}}
+    result = {"runs": runs, "summary": {g: {n: summarize(r) for n, r in v.items()}
+                                        for g, v in runs.items()}}
+    c = target_counts(result)
+    assert c["global"] == {"groups": 2, "groups_in_band": 1, "global_out_groups": 1,
+                           "global_out_groups_inside": 0, "drives": 8, "drives_in_band": 7,
+                           "global_out_drives": 1, "global_out_drives_inside": 0}
+    assert c["bias"]["global_out_groups_inside"] == 1 and c["bias"]["drives_in_band"] == 8
+    assert c["adaptive"]["groups_in_band"] == 2  # (3 + 3 + 3 + 10) / 4 = 4.75: in the band
+    assert c["adaptive"]["global_out_drives_inside"] == 0  # 10 > 9.35
+    assert "| bias | 2 / 2 | 1 / 1 | 8 / 8 | 1 / 1 |" in markdown(result)
