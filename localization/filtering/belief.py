@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from localization._validation import check_bool, check_choice, check_int, check_real
+from localization.filtering._belief_contact import BeliefContactMixin
 from localization.filtering._belief_recovery import (  # noqa: F401 (MAX_*: the belief's)
     MAX_HEADING_STD,
     RecoveryMixin,
@@ -62,7 +63,6 @@ from localization.filtering.familiar_start import (
 from localization.filtering.heading_check import check_heading_check, turns_away
 from localization.filtering.localizer_protocol import Localizer, check_localizer
 from localization.filtering.map_contact import (
-    CONTACT_LOST_STEPS,
     CONTACT_MOTIONS,
     REPEAT_CONTACT_STEPS,
     Contact,
@@ -70,9 +70,7 @@ from localization.filtering.map_contact import (
     blocked_motion,
     check_bearing,
     check_free_space,
-    contact_contradicts,
     contact_kinds,
-    contact_projection,
 )
 from localization.filtering.measurement_bias import make_ekf, measurement_bias_for
 from localization.filtering.particle_start import DEFAULT_P0
@@ -86,7 +84,7 @@ NOISE_MODELS = ("global", "heteroscedastic")
 RESET_MODES = ("image", "global")
 
 
-class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
+class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin, BeliefContactMixin):
     """EKF pose belief fed with image features.
 
     Parameters
@@ -377,31 +375,11 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin):
             status = self._on_trial(motion, w, status)
         elif self.monitor is not None:
             status = self._watch(motion, w, nis, status)
-        self._bumped = max(self._bumped - 1, 0)
-        contradicts = "city" in kinds and self.free_space is not None and contact_contradicts(
-            self.free_space, self.ekf.x, self.ekf.P, bearing)
-        if contradicts and self.project_contacts and bearing is not None:
-            self._project(bearing)
-        if contradicts or ("city" in kinds and self._repeated_contact()):
-            self._bumped = CONTACT_LOST_STEPS
-        self._since_contact = 0 if "city" in kinds else self._since_contact + 1
+        self._contact(kinds, bearing)
         self._update_status(status)
         if self._unverified and status != "relocalized":
             status = self._verify_start(w, status)
         return nis, status
-
-    def _project(self, bearing: float) -> None:
-        """Move the mean to the nearest pose that explains a contact at ``bearing``."""
-        assert self.ekf is not None and self.free_space is not None
-        pose = contact_projection(self.free_space, self.ekf.x, self.ekf.P, bearing)
-        if pose is not None:
-            self.ekf.x = pose
-
-    def _repeated_contact(self) -> bool:
-        """A contact with the city this step is a second one within ``REPEAT_CONTACT_STEPS``
-        (after a step without) while the belief is not "tracking"."""
-        return (0 < self._since_contact <= REPEAT_CONTACT_STEPS
-                and self.belief_status != "tracking")
 
     def _step_motion(self, u: ArrayLike, kinds: frozenset[str]) -> tuple[Array, Array | None]:
         """The control ``k U`` of this step and its extra process noise (a contact's, of
