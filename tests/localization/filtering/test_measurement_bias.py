@@ -116,3 +116,27 @@ def test_options():
     assert measurement_bias_for(bias) is bias
     assert measurement_bias_for({"phi": 0.9}).phi == 0.9
     assert type(make_ekf(UnicycleModel(dt=0.1), Q, np.zeros(3), P0, 0.997, None)) is PoseEKF
+
+
+def test_heading_inflation_keeps_the_joint_covariance():
+    """BeliefFilter's heading inflation scales P's heading row and column and P_xb's heading
+    row alike (a congruence): the joint covariance stays positive semi-definite and the
+    cross-covariance is kept, not dropped at the next update."""
+    from localization.filtering._belief_recovery import RecoveryMixin
+
+    F, model = UnicycleModel(dt=0.1), PoseMeasurement(R_MODEL)
+    ekf = BiasedPoseEKF(F, Q, np.zeros(3), P0)
+    for z in ([0.05, 0.0, 0.01], [0.1, 0.01, 0.0]):
+        ekf.predict(np.array([1.0, 0.2]))
+        ekf.update(np.array(z), model)
+    host = RecoveryMixin()
+    host.ekf, host.inflate_factor = ekf, 4.0
+    P_xb = ekf.P_xb.copy()
+    host._inflate_heading()
+    np.testing.assert_allclose(ekf.P_xb[:2], P_xb[:2])
+    np.testing.assert_allclose(ekf.P_xb[2], 2.0 * P_xb[2])
+    Pa = np.block([[ekf.P, ekf.P_xb], [ekf.P_xb.T, ekf.P_bb]])
+    assert np.linalg.eigvalsh(Pa)[0] > -1e-12
+    kept = ekf.P_xb.copy()
+    ekf._joint(3, R_MODEL)  # the update's check: nothing to repair
+    np.testing.assert_array_equal(ekf.P_xb, kept)
