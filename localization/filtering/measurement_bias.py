@@ -131,9 +131,11 @@ class BiasedPoseEKF(PoseEKF):
         self.P_bb = phi ** 2 * self.P_bb + (1.0 - phi ** 2) * self._R_b
 
     def _joint(self, dim_z: int, R: Array) -> tuple[Array, Array]:
-        """The bias ``b`` and the joint covariance ``Pa`` (3 + dim_z square); a bias of
-        another width (a new model) or a joint covariance made indefinite by a change of P
-        outside the filter (a heading inflation) starts from its stationary state."""
+        """The bias ``b`` and the joint covariance ``Pa`` (3 + dim_z square). A bias of
+        another width (a new model) starts from its stationary state; a joint covariance
+        made indefinite by a caller shrinking P drops ``P_xb`` (the belief's own changes of
+        P keep it positive semi-definite: the heading inflation scales ``P_xb`` with P, the
+        divergence monitor's widening only adds to P)."""
         rho = self.bias.rho
         if self.b is None or self.b.shape != (dim_z,):
             self.b, self.P_bb, self.P_xb = np.zeros(dim_z), rho * R, np.zeros((3, dim_z))
