@@ -9,19 +9,23 @@ drive (lag 1: 0.3-0.7). The standard remedy is to augment the state with the col
 of the noise (Bar-Shalom, Li and Kirubarajan, "Estimation with Applications to Tracking and
 Navigation", 2001, §8.2; Gelb, "Applied Optimal Estimation", 1974, §4.5)::
 
-    z_k = h(x_k) + b_k + v_k,          v_k ~ N(0, (1 - rho) R(x_k))      (white part)
-    b_k = phi b_{k-1} + n_k,           n_k ~ N(0, (1 - phi^2) rho R)    (stationary Cov(b) = rho R)
+    z_k = h(x_k) + b_k + v_k,          v_k ~ N(0, R - rho R0)            (white part)
+    b_k = phi b_{k-1} + n_k,           n_k ~ N(0, (1 - phi^2) rho R0)   (stationary Cov(b) = rho R0)
 
 so the total noise keeps the calibrated ``R``, a share ``rho`` of it correlated with
-per-step correlation ``phi``. With ``P_xb`` the pose-bias cross-covariance and ``P_bb`` the
+per-step correlation ``phi``. ``R0`` is the model's noise of the place (its ``gate_R(x)``
+when it has one, else R): the bias belongs to the map, so a frame's own inflation (an
+unfamiliar image, :mod:`~localization.filtering.heteroscedastic_noise`) or the innovations'
+scaling (:mod:`~localization.filtering.adaptive_noise`) widens the white part only; with
+one global R, ``R0 = R`` and the white part is ``(1 - rho) R``. With ``P_xb`` the pose-bias cross-covariance and ``P_bb`` the
 bias covariance, one step of :class:`BiasedPoseEKF` is, in the code's names::
 
     predict:  x = F(x, u),  P = F P F^T + Q,  b = phi b,  P_xb = phi F P_xb,
-              P_bb = phi^2 P_bb + (1 - phi^2) rho R
+              P_bb = phi^2 P_bb + (1 - phi^2) rho R0
     update:   Ha = [H, I],  Pa = [[P, P_xb], [P_xb^T, P_bb]],  y = residual(z, h(x) + b),
-              S = Ha Pa Ha^T + (1 - rho) R,  NIS = y^T S^-1 y  (gated as PoseEKF),
-              K = Pa Ha^T S^-1,  [x; b] += K y,
-              Pa = (I - K Ha) Pa (I - K Ha)^T + K (1 - rho) R K^T
+              NIS = y^T (Ha Pa Ha^T + (1 - rho) R0)^-1 y  (gated as PoseEKF, on R0),
+              S = Ha Pa Ha^T + R - rho R0,  K = Pa Ha^T S^-1,  [x; b] += K y,
+              Pa = (I - K Ha) Pa (I - K Ha)^T + K (R - rho R0) K^T
 
 The pose part ``x``, ``P`` is what the belief reports; the bias starts at zero with its
 stationary covariance at the first update after each (re)start. ``rho = 0.45``, ``phi =
@@ -116,11 +120,11 @@ class BiasedPoseEKF(PoseEKF):
         self.b: Array | None = None
         self.P_bb: Array | None = None
         self.P_xb: Array | None = None
-        self._R_b: Array | None = None  # the stationary Cov(b) = rho R of the last update
+        self._R_b: Array | None = None  # the stationary Cov(b) = rho R0 of the last update
 
     def predict(self, u: ArrayLike, Q_extra: ArrayLike | None = None) -> None:
         """PoseEKF's prior, and ``b = phi b``, ``P_xb = phi F P_xb``,
-        ``P_bb = phi^2 P_bb + (1 - phi^2) rho R``."""
+        ``P_bb = phi^2 P_bb + (1 - phi^2) rho R0``."""
         super().predict(u, Q_extra)
         if self.b is None:
             return
@@ -152,18 +156,19 @@ class BiasedPoseEKF(PoseEKF):
         """Gated update of the pose and the bias (the module docstring's equations)."""
         z, z_pred, H, R, _ = self.innovation(z, model)
         dim_z, rho = z.shape[0], self.bias.rho
-        b, Pa = self._joint(dim_z, R)
-        self._R_b = rho * R
+        gate_R = getattr(model, "gate_R", None)
+        R0 = R if gate_R is None else np.asarray(gate_R(self.x), dtype=np.float64)
+        b, Pa = self._joint(dim_z, R0)
+        self._R_b = rho * R0  # the map's bias: without the frame's inflation or scaling
         Ha = np.hstack([H, np.eye(dim_z)])
         y = np.asarray(model.residual(z, z_pred + b), dtype=np.float64)
-        gate_R = getattr(model, "gate_R", None)
-        R_gate = R if gate_R is None else np.asarray(gate_R(self.x), dtype=np.float64)
         HPH = Ha @ Pa @ Ha.T
+        white = R - rho * R0  # the rest of R (>= (1 - rho) R0: inflation only grows R)
         try:
-            nis = float(y @ cho_solve(cho_factor(HPH + (1.0 - rho) * R_gate), y))
-            S = cho_factor(HPH + (1.0 - rho) * R)
+            nis = float(y @ cho_solve(cho_factor(HPH + (1.0 - rho) * R0), y))
+            S = cho_factor(HPH + white)
         except LinAlgError:
-            raise ValueError("innovation covariance S = Ha Pa Ha^T + (1 - rho) R is not "
+            raise ValueError("innovation covariance S = Ha Pa Ha^T + R - rho R0 is not "
                              "positive definite") from None
         threshold = gate_threshold(self.gate_probability, dim_z)
         if nis > threshold:
@@ -171,7 +176,7 @@ class BiasedPoseEKF(PoseEKF):
         K = cho_solve(S, Ha @ Pa).T
         d = K @ y
         A = np.eye(len(Pa)) - K @ Ha
-        Pa = A @ Pa @ A.T + (1.0 - rho) * (K @ R @ K.T)
+        Pa = A @ Pa @ A.T + K @ white @ K.T
         Pa = 0.5 * (Pa + Pa.T)
         self.x = self.x + d[:3]
         self.x[2] = wrap_angle(self.x[2])

@@ -140,3 +140,20 @@ def test_heading_inflation_keeps_the_joint_covariance():
     kept = ekf.P_xb.copy()
     ekf._joint(3, R_MODEL)  # the update's check: nothing to repair
     np.testing.assert_array_equal(ekf.P_xb, kept)
+
+
+def test_the_bias_is_the_maps_not_the_frames():
+    """A model whose R is inflated for this frame (its gate_R the place's R): the bias's
+    stationary covariance is rho gate_R, the inflation goes to the white part only."""
+    from localization.filtering.adaptive_noise import ScaledMeasurement
+
+    F = UnicycleModel(dt=0.1)
+    inflated = ScaledMeasurement(PoseMeasurement(R_MODEL), 9.0)  # R = 9 R_MODEL, gate R_MODEL
+    ekf = BiasedPoseEKF(F, Q, np.zeros(3), P0, bias=MeasurementBias(rho=0.5, phi=0.5))
+    ekf.update(np.array([0.05, 0.0, 0.0]), inflated)
+    ekf.predict(np.array([1.0, 0.0]))
+    np.testing.assert_allclose(ekf._R_b, 0.5 * R_MODEL)
+    assert np.all(np.diag(ekf.P_bb) < R_MODEL.diagonal())  # never the inflated 9 R
+    plain = BiasedPoseEKF(F, Q, np.zeros(3), P0, bias=MeasurementBias(rho=0.5, phi=0.5))
+    plain.update(np.array([0.05, 0.0, 0.0]), PoseMeasurement(9.0 * R_MODEL))
+    assert np.all(np.diag(plain.P_bb) > np.diag(ekf.P_bb))  # without gate_R: the model's R
