@@ -160,6 +160,8 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin, BeliefContact
     last_update : UpdateResult or None
     belief_status : one of ``BELIEF_STATUSES``
     monitor : DivergenceMonitor or None
+    bias : MeasurementBias or None
+        The ``measurement_bias`` settings (the EKF is then a ``BiasedPoseEKF``).
     """
 
     def __init__(self, localizer: Localizer, motion_model: Any,
