@@ -16,7 +16,7 @@ from __future__ import annotations
 import numbers
 from collections.abc import Collection, Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,9 +31,11 @@ __all__ = [
     "check_options",
     "check_real",
     "check_seed",
+    "check_settings",
 ]
 
 Shape = tuple[int | None, ...]
+T = TypeVar("T")
 
 
 def _kind(value: object) -> str:
@@ -129,6 +131,30 @@ def check_options(options: object, name: str, allowed: Iterable[str]) -> dict[st
     if unknown:
         raise ValueError(f"unknown {name} key(s) {unknown}; allowed keys: {allowed}")
     return dict(options)
+
+
+def check_settings(option: object, name: str, cls: type[T]) -> T | None:
+    """The settings object a bool-or-settings option asks for: False -> None, True ->
+    ``cls()``, a dict -> ``cls(**option)``, a ``cls`` instance as is (e.g.
+    ``BeliefFilter(adaptive_noise=...)``).
+
+    Raises
+    ------
+    TypeError
+        If ``option`` is of another kind, or the dict has a key ``cls`` does not take (the
+        message names ``name``).
+    """
+    if isinstance(option, cls):
+        return option
+    if isinstance(option, (bool, np.bool_)):
+        return cls() if option else None
+    if isinstance(option, Mapping):
+        try:
+            return cls(**option)
+        except TypeError as err:
+            raise TypeError(f"{name}: {err}") from None
+    raise TypeError(f"{name} must be a bool, a dict of {cls.__name__} settings or a "
+                    f"{cls.__name__}, got {_kind(option)}")
 
 
 def check_array(value: object, name: str, *, shape: Shape | None = None, ndim: int | None = None,

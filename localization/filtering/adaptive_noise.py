@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from localization._validation import check_real
+from localization._validation import check_real, check_settings
 from localization.geometry import Array
 
 __all__ = ["InnovationScale", "ScaledMeasurement", "innovation_scale"]
@@ -110,18 +110,6 @@ class InnovationScale:
 
 
 def innovation_scale(option: bool | dict[str, Any] | InnovationScale) -> InnovationScale | None:
-    """The :class:`InnovationScale` an ``adaptive_noise`` option asks for (None: off).
-
-    Raises
-    ------
-    TypeError
-        If ``option`` is not a bool, a dict of settings or an InnovationScale.
-    """
-    if isinstance(option, InnovationScale):
-        return option
-    if isinstance(option, (bool, np.bool_)):
-        return InnovationScale() if option else None
-    if isinstance(option, dict):
-        return InnovationScale(**option)
-    raise TypeError("adaptive_noise must be a bool, a dict of InnovationScale settings or an "
-                    f"InnovationScale, got {type(option).__name__}")
+    """The :class:`InnovationScale` an ``adaptive_noise`` option asks for (None: off;
+    :func:`~localization._validation.check_settings`)."""
+    return check_settings(option, "adaptive_noise", InnovationScale)

@@ -92,7 +92,7 @@ from typing import Any
 
 import numpy as np
 
-from localization._validation import check_int, check_real
+from localization._validation import check_int, check_real, check_settings
 from localization.filtering._modes import circular_mean, find_modes
 from localization.filtering.ekf import chi2_band
 from localization.filtering.particle_motion import predict_particles
@@ -377,13 +377,5 @@ class DivergenceMonitor:
 
 def monitor_for(detect: bool | dict[str, Any]) -> DivergenceMonitor | None:
     """The monitor for ``detect_divergence``: False -> None, True -> defaults, dict -> its
-    settings."""
-    if isinstance(detect, dict):
-        try:
-            return DivergenceMonitor(**detect)
-        except TypeError as err:
-            raise TypeError(f"detect_divergence: {err}") from None
-    if isinstance(detect, (bool, np.bool_)):
-        return DivergenceMonitor() if detect else None
-    raise TypeError(f"detect_divergence must be a bool or a dict of DivergenceMonitor settings, "
-                    f"got {detect!r}")
+    settings (:func:`~localization._validation.check_settings`)."""
+    return check_settings(detect, "detect_divergence", DivergenceMonitor)

@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
-from localization._validation import check_real
+from localization._validation import check_real, check_settings
 from localization.filtering.ekf import (
     MeasurementModel,
     PoseEKF,
@@ -76,25 +76,9 @@ class MeasurementBias:
 
 
 def measurement_bias_for(option: bool | dict[str, Any] | MeasurementBias) -> MeasurementBias | None:
-    """The :class:`MeasurementBias` a ``measurement_bias`` option asks for (None: off).
-
-    Raises
-    ------
-    TypeError
-        If ``option`` is not a bool, a dict of settings or a MeasurementBias.
-    """
-    if isinstance(option, MeasurementBias):
-        return option
-    if isinstance(option, (bool, np.bool_)):
-        return MeasurementBias() if option else None
-    if isinstance(option, dict):
-        unknown = set(option) - {"rho", "phi"}
-        if unknown:
-            raise TypeError(f"measurement_bias got unknown settings {sorted(unknown)}; "
-                            "it takes rho and phi")
-        return MeasurementBias(**option)
-    raise TypeError("measurement_bias must be a bool, a dict of MeasurementBias settings or a "
-                    f"MeasurementBias, got {type(option).__name__}")
+    """The :class:`MeasurementBias` a ``measurement_bias`` option asks for (None: off;
+    :func:`~localization._validation.check_settings`)."""
+    return check_settings(option, "measurement_bias", MeasurementBias)
 
 
 class BiasedPoseEKF(PoseEKF):
