@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from localization._validation import check_real, check_settings
+from localization.filtering.ekf import noise_at
 from localization.geometry import Array
 
 __all__ = ["InnovationScale", "ScaledMeasurement", "innovation_scale"]
@@ -52,18 +53,15 @@ class ScaledMeasurement:
             return lambda x: self.scale * np.asarray(R(x), dtype=np.float64)
         return self.scale * np.asarray(R, dtype=np.float64)
 
-    def _base_R(self, x: Array) -> Array:
-        R_at = getattr(self.model, "R_at", None)
-        return np.asarray(R_at(x) if callable(R_at) else self.model.R, dtype=np.float64)
-
     def R_at(self, x: Array) -> Array:
         """``scale R(x)``."""
-        return self.scale * self._base_R(x)
+        return self.scale * noise_at(self.model, x)
 
     def gate_R(self, x: Array) -> Array:
         """The wrapped model's gate noise (its ``gate_R(x)``, else its R(x))."""
         gate_R = getattr(self.model, "gate_R", None)
-        return np.asarray(gate_R(x), dtype=np.float64) if callable(gate_R) else self._base_R(x)
+        return np.asarray(gate_R(x), dtype=np.float64) if callable(gate_R) else \
+            noise_at(self.model, x)
 
 
 class InnovationScale:

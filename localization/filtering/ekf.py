@@ -122,6 +122,12 @@ def _covariance(C: ArrayLike, name: str, dim: int, definite: bool = True) -> Arr
     return 0.5 * (C + C.T)
 
 
+def noise_at(model: MeasurementModel, x: Array) -> Array:
+    """A measurement model's R at ``x``: its ``R_at(x)`` when it has one, else its ``R``."""
+    R_at = getattr(model, "R_at", None)
+    return np.asarray(R_at(x) if callable(R_at) else model.R, dtype=np.float64)
+
+
 class FunctionMeasurement:
     """Measurement model from callables: ``z = h(x) + v``, ``v ~ N(0, R)``.
 
@@ -323,8 +329,7 @@ class PoseEKF(ExtendedKalmanFilter):
             raise OutOfDomainError(f"the measurement model has no Jacobian at x = {self.x}")
         if not np.all(np.isfinite(H)):
             raise ValueError("H(x) contains inf")
-        R_at = getattr(model, "R_at", None)
-        R = _covariance(R_at(self.x) if callable(R_at) else model.R, "R", dim_z)
+        R = _covariance(noise_at(model, self.x), "R", dim_z)
         y = _finite_vector(model.residual(z, z_pred), "residual(z, z_pred)", dim_z)
         return z, z_pred, H, R, y
 
@@ -350,9 +355,7 @@ class PoseEKF(ExtendedKalmanFilter):
         """
         z, z_pred, H, R, y = self.innovation(z, model)
         dim_z = z.shape[0]
-        gate_R = getattr(model, "gate_R", None)
-        R_gate = R if gate_R is None else _covariance(gate_R(self.x), "gate_R(x)", dim_z)
-        S = H @ self.P @ H.T + R_gate
+        S = H @ self.P @ H.T + self.gate_noise(model, R)
         try:
             nis = float(y @ cho_solve(cho_factor(S), y))
         except LinAlgError:
@@ -366,6 +369,12 @@ class PoseEKF(ExtendedKalmanFilter):
         self.P = 0.5 * (self.P + self.P.T)
         self.x_post, self.P_post = self.x.copy(), self.P.copy()
         return UpdateResult(nis=nis, accepted=True, dim_z=dim_z, threshold=threshold)
+
+    def gate_noise(self, model: MeasurementModel, R: Array) -> Array:
+        """The noise the NIS gate uses at ``x``: the model's ``gate_R(x)`` (checked) when it
+        has one, else ``R`` (the model's noise there, from :meth:`innovation`)."""
+        gate_R = getattr(model, "gate_R", None)
+        return R if not callable(gate_R) else _covariance(gate_R(self.x), "gate_R(x)", len(R))
 
     def snapshot(self) -> tuple[Array, ...]:
         """Copies of ``x`` and ``P`` (a subclass adds its own state), for :meth:`restore`."""

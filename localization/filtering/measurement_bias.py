@@ -140,8 +140,7 @@ class BiasedPoseEKF(PoseEKF):
         """Gated update of the pose and the bias (the module docstring's equations)."""
         z, z_pred, H, R, _ = self.innovation(z, model)
         dim_z, rho = z.shape[0], self.bias.rho
-        gate_R = getattr(model, "gate_R", None)
-        R0 = R if gate_R is None else np.asarray(gate_R(self.x), dtype=np.float64)
+        R0 = self.gate_noise(model, R)
         b, Pa = self._joint(dim_z, R0)
         self._R_b = rho * R0  # the map's bias: without the frame's inflation or scaling
         Ha = np.hstack([H, np.eye(dim_z)])
