@@ -13,6 +13,7 @@ every layer of :mod:`localization` and :mod:`agents` may use it.
 
 from __future__ import annotations
 
+import copy
 import numbers
 from collections.abc import Collection, Iterable, Mapping
 from pathlib import Path
@@ -135,8 +136,12 @@ def check_options(options: object, name: str, allowed: Iterable[str]) -> dict[st
 
 def check_settings(option: object, name: str, cls: type[T]) -> T | None:
     """The settings object a bool-or-settings option asks for: False -> None, True ->
-    ``cls()``, a dict -> ``cls(**option)``, a ``cls`` instance as is (e.g.
-    ``BeliefFilter(adaptive_noise=...)``).
+    ``cls()``, a dict -> ``cls(**option)``, a ``cls`` instance -> a deep copy of it (e.g.
+    ``BeliefFilter(adaptive_noise=...)``). The copy matters for the stateful ones
+    (``InnovationScale``'s running mean, ``DivergenceMonitor``'s windows): one instance given
+    to two filters, or to a wrapper that makes one filter per env, would otherwise be shared
+    and each filter would read the other's innovations, as scikit-learn clones an estimator
+    given as a parameter.
 
     Raises
     ------
@@ -145,7 +150,7 @@ def check_settings(option: object, name: str, cls: type[T]) -> T | None:
         message names ``name``).
     """
     if isinstance(option, cls):
-        return option
+        return copy.deepcopy(option)
     if isinstance(option, (bool, np.bool_)):
         return cls() if option else None
     if isinstance(option, Mapping):

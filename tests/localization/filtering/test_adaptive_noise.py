@@ -109,5 +109,6 @@ def test_options():
     assert innovation_scale(False) is None
     assert isinstance(innovation_scale(True), InnovationScale)
     s = InnovationScale(rate=0.2)
-    assert innovation_scale(s) is s
+    copy = innovation_scale(s)
+    assert copy is not s and (copy.rate, copy.max_scale) == (s.rate, s.max_scale)
     assert innovation_scale({"rate": 0.2, "max_scale": 3.0}).max_scale == 3.0

@@ -113,7 +113,7 @@ def test_options():
     assert measurement_bias_for(False) is None
     assert measurement_bias_for(True) == MeasurementBias(rho=0.45, phi=0.65)
     bias = MeasurementBias(rho=0.2)
-    assert measurement_bias_for(bias) is bias
+    assert measurement_bias_for(bias) == bias
     assert measurement_bias_for({"phi": 0.9}).phi == 0.9
     assert type(make_ekf(UnicycleModel(dt=0.1), Q, np.zeros(3), P0, 0.997, None)) is PoseEKF
 

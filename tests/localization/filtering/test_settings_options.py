@@ -23,7 +23,26 @@ def test_each_kind_of_option():
     assert check_settings(True, "opt", Settings) == Settings()
     assert check_settings({"rate": 0.3}, "opt", Settings) == Settings(rate=0.3)
     s = Settings(rate=0.2)
-    assert check_settings(s, "opt", Settings) is s
+    assert check_settings(s, "opt", Settings) == s
+
+
+def test_an_instance_is_copied_so_two_filters_do_not_share_its_state(localizer):
+    """One stateful settings object given to two beliefs (or to a wrapper that makes one
+    per env): each belief gets its own copy, so one's innovations never scale the other's R."""
+    from localization.filtering.adaptive_noise import InnovationScale
+    from localization.filtering.divergence import DivergenceMonitor
+    from tests.localization.conftest import make_env
+
+    F = make_env().unwrapped.motion_model
+    scale, monitor = InnovationScale(rate=0.5), DivergenceMonitor(window=10)
+    a = BeliefFilter(localizer, F, adaptive_noise=scale, detect_divergence=monitor)
+    b = BeliefFilter(localizer, F, adaptive_noise=scale, detect_divergence=monitor)
+    assert a.adaptive is not b.adaptive and a.adaptive is not scale
+    assert a.monitor is not b.monitor and a.monitor is not monitor
+    assert (a.adaptive.rate, a.monitor.window) == (0.5, 10)
+    a.adaptive.record(30.0, 3, 50.0)
+    assert a.adaptive.scale > 1.0
+    assert b.adaptive.scale == 1.0 and scale.scale == 1.0
 
 
 @pytest.mark.parametrize("option, match", [
