@@ -121,7 +121,9 @@ class AppearanceBenchConfig:
                 "15.6); off: with the global R on tuning cities 11-12 it brought 2 presets "
                 "into the NEES band, the rule asked 3; with --appearance-noise heteroscedastic "
                 "it passed on tuning cities 13-14 (daylight map) and held out put 6 of 10 "
-                "presets in the band, against 1 (docs/benchmarks.md section 9, stop 69)"})
+                "presets in the band, against 1, but on the five-map localizer (tuning 11-12) "
+                "it lost a traffic drive, mean RMSE 2.20x (docs/benchmarks.md section 9, "
+                "stops 69-70)"})
     calibrate_on_belief: bool = field(default=False, metadata={
         "help": "refine each localizer's consistency on a drive on its own belief (in the "
                 "training's look) after the true-pose drive; off: on tuning cities 11-12 it "
