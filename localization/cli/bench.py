@@ -196,7 +196,8 @@ def _check_appearance_bench(c: AppearanceBenchConfig) -> None:
     check_choice("appearance_noise", c.noise, NOISE_MODELS)
     check_numbers(c, positive=("image_size", "n_train", "n_drive", "n_components", "n_test",
                                "n_drives", "drive_steps", "patch_floor"),
-                  non_negative=("motion_noise", "seed", "forward_ridge", "verify", "turns"),
+                  non_negative=("motion_noise", "seed", "forward_ridge", "verify", "turns",
+                                "familiar_novelty"),
                   prefix="appearance_")
     if not (c.verify_margin >= 1.0 and math.isfinite(c.verify_margin)):
         raise UsageError("appearance_verify_margin", "must be >= 1 (a candidate must explain "

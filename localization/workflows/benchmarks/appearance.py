@@ -237,14 +237,16 @@ def single_image_scores(loc: Any, images: np.ndarray, poses: np.ndarray, verify:
 
 
 def closed_loop(env: OcclusionRecorder, loc: Any, lanes: str, steps: int, k: int, seed: int,
-                noise: str = "global", adaptive: bool = False, bias: bool = False
-                ) -> dict[str, Any]:
+                noise: str = "global", adaptive: bool = False, bias: bool = False,
+                familiar: float = 0.0) -> dict[str, Any]:
     """Drive ``k`` on the belief (around the route from path point ``600 k``, or a random
     street tour; measurement noise ``noise``, scaled by the innovations if ``adaptive``,
-    with a persistent bias state if ``bias``): squared errors, run-averaged NEES,
-    occlusion, jumps."""
+    with a persistent bias state if ``bias``, (re)starts only from images of relative
+    novelty <= ``familiar`` if > 0): squared errors, run-averaged NEES, occlusion, jumps."""
     options = {"filter_options": {"noise": noise, "adaptive_noise": adaptive,
                                   "measurement_bias": bias}}
+    if familiar > 0:
+        options["filter_options"]["familiar_novelty"] = familiar
     if lanes == "route":
         run = track_route(env, loc, "representation", steps, start=600 * k, seed=seed,
                           **options)
@@ -317,7 +319,8 @@ def run_appearance_bench(args: AppearanceBenchConfig) -> dict[str, Any]:
                         drives[t][c].append(closed_loop(env, loc, args.lanes,
                                                         args.drive_steps, k, base + 100 + k,
                                                         args.noise, args.adaptive_noise,
-                                                        args.measurement_bias))
+                                                        args.measurement_bias,
+                                                        args.familiar_novelty))
                 env.close()
                 bar.update()
     summary = {t: {c: summarize(single[t][c], drives[t][c]) if drives[t][c] else None
@@ -337,6 +340,8 @@ def run_appearance_bench(args: AppearanceBenchConfig) -> dict[str, Any]:
                        f"{args.drive_steps} steps per city and condition, {args.noise} R"
                        + (" scaled by the innovations" if args.adaptive_noise else "")
                        + (" with a persistent bias state" if args.measurement_bias else "")
+                       + (f", (re)starts only from images of novelty <= "
+                          f"{args.familiar_novelty:g}" if args.familiar_novelty else "")
                        + (f"; single images verified against {args.verify} retrieved "
                           f"poses (margin {args.verify_margin})" if args.verify else "")
                        + (f"; positions the median over views turned by up to {args.turns} "

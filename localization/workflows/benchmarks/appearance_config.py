@@ -124,6 +124,11 @@ class AppearanceBenchConfig:
                 "presets in the band, against 1, but on the five-map localizer (tuning 11-12) "
                 "it lost a traffic drive, mean RMSE 2.20x (docs/benchmarks.md section 9, "
                 "stops 69-70)"})
+    familiar_novelty: float = field(default=0.0, metadata={
+        "help": "the closed loop's belief starts and restarts only from familiar images "
+                "(BeliefFilter(familiar_novelty=...), relative novelty at most this, "
+                "docs/method.md section 13.5; 0: off). Stop 70's lead: on tuning city 11 a "
+                "traffic drive pushed off the lane maps restarted 12 m away without it"})
     calibrate_on_belief: bool = field(default=False, metadata={
         "help": "refine each localizer's consistency on a drive on its own belief (in the "
                 "training's look) after the true-pose drive; off: on tuning cities 11-12 it "

@@ -104,6 +104,11 @@ def test_heteroscedastic_noise_fits_the_folds_and_reaches_the_drives(monkeypatch
     with pytest.raises(RuntimeError, match="stop here"):  # --appearance-measurement-bias
         appearance.closed_loop(None, None, "route", 10, 0, 1, "global", False, True)
     assert seen["filter_options"]["measurement_bias"] is True
+    assert "familiar_novelty" not in seen["filter_options"]  # 0: off
+    with pytest.raises(RuntimeError, match="stop here"):  # --appearance-familiar-novelty
+        appearance.closed_loop(None, None, "route", 10, 0, 1, "global", False, False, 3.0)
+    assert seen["filter_options"]["familiar_novelty"] == 3.0
+    assert set(seen["filter_options"]) <= set(FILTER_OPTIONS["ekf"])
 
 
 def test_experience_maps_are_daylight_and_a_draw_of_each_other_family():
@@ -138,6 +143,7 @@ def test_targets_are_the_issues():
     ("verify_margin", 0.5, "--appearance-verify-margin"),
     ("patch_floor", 0.0, "--appearance-patch-floor"),
     ("map_camera", "lens", "--appearance-map-camera"),
+    ("familiar_novelty", -1.0, "--appearance-familiar-novelty"),
 ])
 def test_bad_options_are_named(field, value, option):
     args = Args(only="appearance", appearance=AppearanceBenchConfig(**{field: value}))
