@@ -183,6 +183,7 @@ def _check_appearance_bench(c: AppearanceBenchConfig) -> None:
     check_int_list("appearance_cities", c.cities, minimum=0)
     check_choices("appearance_conditions", c.conditions, CONDITION_NAMES)
     check_choices("appearance_trainings", c.trainings, TRAININGS)
+    check_choices("appearance_smooth_trainings", c.smooth_trainings, TRAININGS)
     check_choice("appearance_normalize", c.normalize, NORMALIZATIONS)
     check_choice("appearance_features", c.features, APPEARANCE_FEATURES)
     check_choice("appearance_lanes", c.lanes, LANE_SETS)
@@ -197,7 +198,7 @@ def _check_appearance_bench(c: AppearanceBenchConfig) -> None:
     check_numbers(c, positive=("image_size", "n_train", "n_drive", "n_components", "n_test",
                                "n_drives", "drive_steps", "patch_floor"),
                   non_negative=("motion_noise", "seed", "forward_ridge", "verify", "turns",
-                                "familiar_novelty"),
+                                "familiar_novelty", "smooth"),
                   prefix="appearance_")
     if not (c.verify_margin >= 1.0 and math.isfinite(c.verify_margin)):
         raise UsageError("appearance_verify_margin", "must be >= 1 (a candidate must explain "

@@ -12,12 +12,13 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from scipy import ndimage
 
 from localization._validation import check_choice, check_int, check_real
 from localization.features._pca import fit_pca, pca_from_state, pca_project, pca_state
 from localization.features.base import FeatureExtractor
 
-__all__ = ["NORMALIZATIONS", "PixelPCA", "normalize_patches", "normalize_pixels"]
+__all__ = ["NORMALIZATIONS", "PixelPCA", "normalize_patches", "normalize_pixels", "smooth_images"]
 
 #: the values of ``PixelPCA(normalize=...)``
 NORMALIZATIONS = ("none", "standardize", "channels", "equalize", "patches")
@@ -88,6 +89,24 @@ def normalize_patches(x: np.ndarray, size: int, floor: float) -> np.ndarray:
     return z / (np.sqrt(block_mean(z * z)) + np.float32(floor))
 
 
+def smooth_images(x: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian blur of standard deviation ``sigma`` (px) over the rows and columns of every
+    image and channel (edges extended by their nearest pixel; truncated at 4 sigma).
+
+    Parameters
+    ----------
+    x : (n, H, W, C) float32 — pixels.
+    sigma : float >= 0 — 0 returns ``x``.
+
+    Returns
+    -------
+    (n, H, W, C) float32
+    """
+    if sigma == 0:
+        return x
+    return ndimage.gaussian_filter(x, sigma=(0.0, sigma, sigma, 0.0), mode="nearest")
+
+
 class PixelPCA(FeatureExtractor):
     """Raw pixels scaled to [0, 1] (optionally grey) -> PCA: the classical appearance baseline.
 
@@ -113,6 +132,10 @@ class PixelPCA(FeatureExtractor):
     patch_floor : float
         Added to each patch's standard deviation (pixel values in [0, 1]) by
         ``normalize="patches"``.
+    smooth : float
+        Standard deviation (px) of a Gaussian blur of every image and channel before the
+        normalisation (:func:`smooth_images`): sensor noise is averaged away before a flat
+        patch's standardisation can blow it up; 0 (default) keeps the pixels.
 
     Attributes
     ----------
@@ -127,7 +150,7 @@ class PixelPCA(FeatureExtractor):
     def __init__(self, n_components: int = 64, grayscale: bool = False, whiten: bool = False,
                  random_state: int | None = 0, mask: Any = None,
                  normalize: str = "none", patch_size: int = 8,
-                 patch_floor: float = 0.001) -> None:
+                 patch_floor: float = 0.001, smooth: float = 0.0) -> None:
         self.n_components = n_components
         self.grayscale = grayscale
         self.whiten = whiten
@@ -136,11 +159,14 @@ class PixelPCA(FeatureExtractor):
         self.normalize = normalize
         self.patch_size = patch_size
         self.patch_floor = patch_floor
+        self.smooth = smooth
 
     def _pixels(self, images: np.ndarray) -> np.ndarray:
         x = images.astype(np.float32) / np.float32(255.0)
         if self.grayscale:
             x = (x @ np.array([0.299, 0.587, 0.114], dtype=np.float32))[..., None]
+        if self.smooth > 0:
+            x = smooth_images(x, float(self.smooth))
         if self.normalize == "patches":
             x = normalize_patches(x, int(self.patch_size), float(self.patch_floor))
         if self.mask is not None:
@@ -157,6 +183,7 @@ class PixelPCA(FeatureExtractor):
         check_choice(self.normalize, "normalize", NORMALIZATIONS)
         check_int(self.patch_size, "patch_size", low=1)
         check_real(self.patch_floor, "patch_floor", low=0.0, low_open=True)
+        check_real(self.smooth, "smooth", low=0.0)
         self.pca_ = fit_pca(self._pixels(images), self.n_components, self.whiten,
                             self.random_state)
 

@@ -168,8 +168,14 @@ def make_env(args: AppearanceBenchConfig, city: int, conditions: Any) -> gym.Env
                     motion_noise=args.motion_noise, max_episode_steps=None)
 
 
-def localizer_params(args: AppearanceBenchConfig) -> dict[str, Any]:
-    """The :class:`AppearanceLocalizer` feature settings of ``args.features``."""
+def smooths(args: AppearanceBenchConfig, training: str) -> bool:
+    """Whether the PixelPCA of the localizer ``training`` blurs its images (``args.smooth``)."""
+    return args.smooth > 0 and training in [t.strip() for t in args.smooth_trainings.split(",")]
+
+
+def localizer_params(args: AppearanceBenchConfig, training: str = "daylight") -> dict[str, Any]:
+    """The :class:`AppearanceLocalizer` feature settings of ``args.features`` for the
+    localizer ``training``."""
     if args.features == "small_cnn":
         from localization.features.weights import small_cnn_weights
 
@@ -182,6 +188,8 @@ def localizer_params(args: AppearanceBenchConfig) -> dict[str, Any]:
         params["normalize"] = args.normalize
     if args.normalize == "patches":
         params["patch_floor"] = args.patch_floor
+    if smooths(args, training):
+        params["smooth"] = args.smooth
     return {"features_params": params, "regressor_params": regressor_params(args),
             **noise_params(args)}
 
@@ -204,10 +212,13 @@ def features_label(args: AppearanceBenchConfig) -> str:
     """The feature extractor in the report's words."""
     if args.features == "small_cnn":
         return f"SmallCNN (condition-randomised, other cities; PCA {args.n_components})"
+    smooth = ""
+    if args.smooth > 0:
+        smooth = f", smooth={args.smooth:g} ({args.smooth_trainings.replace(',', ', ')})"
     if args.normalize == "patches":
         return (f"PixelPCA({args.n_components}, normalize={args.normalize}, "
-                f"patch_floor={args.patch_floor:g})")
-    return f"PixelPCA({args.n_components}, normalize={args.normalize})"
+                f"patch_floor={args.patch_floor:g}{smooth})")
+    return f"PixelPCA({args.n_components}, normalize={args.normalize}{smooth})"
 
 
 def fit(args: AppearanceBenchConfig, city: int, training: str) -> Any:
@@ -218,7 +229,8 @@ def fit(args: AppearanceBenchConfig, city: int, training: str) -> Any:
     camera = args.map_camera if training == "randomised" else "look"
     return fit_looks(lambda c: make_env(args, city, c), city, map_looks, looks,
                      args.calibrate_on_belief, camera, n_train=args.n_train, lanes=args.lanes,
-                     n_drive=args.n_drive, seed=args.seed, localizer_params=localizer_params(args))
+                     n_drive=args.n_drive, seed=args.seed,
+                     localizer_params=localizer_params(args, training))
 
 
 def single_image_scores(loc: Any, images: np.ndarray, poses: np.ndarray, verify: int = 0,

@@ -80,6 +80,13 @@ class AppearanceBenchConfig:
                 "cities 11-12 (within (0.25 m, 2 deg) averaged over both localizers and ten "
                 "presets 83.4 against 82.5 and 82.3 %: a higher floor helps the daylight map "
                 "under sensor noise, 78 -> 81-82 %, but costs it night, 70 -> 61 and 52 %)"})
+    smooth: float = field(default=0.0, metadata={
+        "help": "PixelPCA: standard deviation (px) of a Gaussian blur of every image before "
+                "its normalisation (PixelPCA(smooth=...)) in the localizers of "
+                "--appearance-smooth-trainings; 0: off"})
+    smooth_trainings: str = field(default="daylight,randomised", metadata={
+        "help": "comma-separated localizers (daylight, randomised) whose PixelPCA "
+                "--appearance-smooth blurs"})
     first_order: str = field(default="forward", metadata={
         "help": "the first-order terms of GSE's r* (GSERegressor(first_order=...)): frames "
                 "(GSE's recovery Jacobian) or forward (the features' forward model w(theta), "

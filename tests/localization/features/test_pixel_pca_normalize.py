@@ -10,6 +10,7 @@ from localization.features.pixel_pca import (
     PixelPCA,
     normalize_patches,
     normalize_pixels,
+    smooth_images,
 )
 
 
@@ -109,7 +110,41 @@ def test_patches_settings_are_saved_and_masks_apply_after_them(images):
                                          ({"patch_size": 2.5}, TypeError),
                                          ({"patch_floor": 0.0}, ValueError),
                                          ({"patch_floor": float("nan")}, ValueError),
-                                         ({"patch_floor": "small"}, TypeError)])
+                                         ({"patch_floor": "small"}, TypeError),
+                                         ({"smooth": -0.5}, ValueError),
+                                         ({"smooth": float("inf")}, ValueError)])
 def test_bad_patch_settings_are_named(images, params, exc):
     with pytest.raises(exc, match=next(iter(params))):
         PixelPCA(n_components=4, normalize="patches", **params).fit(images)
+
+
+def test_smoothing_averages_sensor_noise_before_the_patches_blow_it_up():
+    # a scene of smooth gradients (flat 4 x 4 patches at the floor) under sensor noise of 0.05:
+    # the blur brings the noisy image's features back towards the clean image's
+    rng = np.random.default_rng(1)
+    yy, xx = np.mgrid[0:16, 0:16] / 16.0
+    phases = rng.uniform(0, 2 * np.pi, (30, 1, 1, 3))
+    clean = 0.5 + 0.3 * np.sin(2 * np.pi * (xx + yy)[None, :, :, None] + phases)
+    noisy = np.clip(clean + rng.normal(0.0, 0.05, clean.shape), 0, 1)
+    to_u8 = lambda x: np.round(255 * x).astype(np.uint8)
+
+    def feature_gap(smooth):
+        pca = PixelPCA(n_components=8, normalize="patches", patch_size=4,
+                       smooth=smooth).fit(to_u8(clean))
+        gap = pca.transform(to_u8(noisy)) - pca.transform(to_u8(clean))
+        return np.linalg.norm(gap, axis=1).mean()
+
+    assert feature_gap(1.0) < 0.5 * feature_gap(0.0)
+
+
+def test_smooth_zero_keeps_the_pixels_and_the_setting_is_saved(images):
+    x = images.astype(np.float32) / 255
+    assert smooth_images(x, 0.0) is x
+    blurred = smooth_images(x, 1.0)
+    assert blurred.shape == x.shape and blurred.dtype == np.float32
+    assert blurred.std() < x.std()  # averages neighbours, per channel
+    assert np.allclose(blurred.mean(axis=(1, 2)), x.mean(axis=(1, 2)), atol=0.02)
+    fitted = PixelPCA(n_components=4, normalize="patches", smooth=0.8).fit(images)
+    again = PixelPCA.from_state(fitted.get_state())
+    assert again.smooth == 0.8
+    assert np.array_equal(again.transform(images), fitted.transform(images))

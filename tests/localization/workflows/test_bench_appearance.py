@@ -142,6 +142,8 @@ def test_targets_are_the_issues():
     ("verify", -1, "--appearance-verify"),
     ("verify_margin", 0.5, "--appearance-verify-margin"),
     ("patch_floor", 0.0, "--appearance-patch-floor"),
+    ("smooth", -1.0, "--appearance-smooth"),
+    ("smooth_trainings", "nightly", "--appearance-smooth-trainings"),
     ("map_camera", "lens", "--appearance-map-camera"),
     ("familiar_novelty", -1.0, "--appearance-familiar-novelty"),
 ])
@@ -208,6 +210,21 @@ def test_patch_floor_reaches_the_pixel_pca_of_patches_only():
     assert "patch_floor=0.02" in features_label(args)
     plain = AppearanceBenchConfig(normalize="channels", patch_floor=0.02)
     assert "patch_floor" not in localizer_params(plain)["features_params"]
+
+
+def test_smooth_reaches_the_pixel_pca_only_when_on():
+    from localization.workflows.benchmarks.appearance import features_label, localizer_params
+
+    on = AppearanceBenchConfig(smooth=0.8)
+    assert localizer_params(on)["features_params"]["smooth"] == 0.8
+    assert "smooth=0.8" in features_label(on)
+    off = AppearanceBenchConfig()
+    assert "smooth" not in localizer_params(off)["features_params"]
+    assert "smooth" not in features_label(off)
+    one = AppearanceBenchConfig(smooth=0.8, smooth_trainings="randomised")
+    assert "smooth" not in localizer_params(one, "daylight")["features_params"]
+    assert localizer_params(one, "randomised")["features_params"]["smooth"] == 0.8
+    assert "smooth=0.8 (randomised)" in features_label(one)
 
 
 def test_map_camera_random_draws_each_map_image_its_camera():
