@@ -40,7 +40,7 @@ def check(args: Args) -> None:
     check_env(args)
     check_numbers(args, positive=("n", "n_components", "figure_components", "ground_range",
                                   "intrinsic_samples", "num_threads"),
-                  non_negative=("seed", "split_seed"))
+                  non_negative=("seed", "split_seed", "pixel_smooth"))
     if args.n < MIN_IMAGES:
         raise UsageError("n", f"must be >= {MIN_IMAGES} (images per data set), got {args.n}")
     if args.imagenet_image_size < 32:

@@ -20,7 +20,8 @@ IMAGENET_LAYER, IMAGENET_GRID = "block10", (1, 2, 3)
 
 
 def make_extractor(name: str, camera: str, mode: str, n_components: int, image_size: int,
-                   ground_range: float = 3.0, num_threads: int = 2) -> Any:
+                   ground_range: float = 3.0, num_threads: int = 2,
+                   smooth: float = 0.0) -> Any:
     """A fresh, unfitted feature extractor.
 
     Parameters
@@ -36,15 +37,17 @@ def make_extractor(name: str, camera: str, mode: str, n_components: int, image_s
         the images are not resized).
     ground_range : the mask hides ground closer than this (m).
     num_threads : torch threads of the CNNs.
+    smooth : the PixelPCAs' Gaussian blur (px) before the PCA (``PixelPCA(smooth=...)``).
     """
     from localization.features import EfficientNetFeatures, PixelPCA
     from localization.features.small_cnn import SmallCNNFeatures
     from localization.features.weights import small_cnn_weights
 
     if name == "pixel_pca":
-        return PixelPCA(n_components)
+        return PixelPCA(n_components, smooth=smooth)
     if name == "pixel_pca_masked":
-        return PixelPCA(n_components, mask=ground_mask(camera, image_size, ground_range))
+        return PixelPCA(n_components, mask=ground_mask(camera, image_size, ground_range),
+                        smooth=smooth)
     if name == "efficientnet":
         return EfficientNetFeatures(input_size=image_size, n_components=n_components,
                                     layer=IMAGENET_LAYER, grid=IMAGENET_GRID,

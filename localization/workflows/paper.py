@@ -87,6 +87,9 @@ class PaperConfig:
         "help": "masked PixelPCA ignores pixels looking at the ground closer than this (m)"})
     features: str = field(default="pixel_pca,pixel_pca_masked,efficientnet,small_cnn",
                           metadata={"help": "feature extractors of Table 2"})
+    pixel_smooth: float = field(default=0.0, metadata={
+        "help": "Gaussian blur (px) of the images of both PixelPCA rows before their PCA "
+                "(PixelPCA(smooth=...)); 0: off"})
     datasets: str = field(default="route,random", metadata={"help": "route and/or random"})
     cv: int = field(default=3, metadata={"help": "cross-validation folds on the training split"})
     intrinsic_samples: int = field(default=2000, metadata={
@@ -196,7 +199,8 @@ def _run(args: PaperConfig) -> dict[str, Any]:
                                                f"{args.imagenet_image_size}-pixel images differ")
                     size, inputs = args.imagenet_image_size, large
                 extractor = make_extractor(feat, camera, mode, args.n_components, size,
-                                           args.ground_range, args.num_threads)
+                                           args.ground_range, args.num_threads,
+                                           args.pixel_smooth)
                 W_tr = extractor.fit_transform(inputs[tr])
                 W_te = extractor.transform(inputs[te])
                 t_feat = time.perf_counter() - t1

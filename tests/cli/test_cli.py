@@ -122,6 +122,7 @@ BAD = [
     ("reproduce --n 10", "--n"),
     ("reproduce --n-components 0", "--n-components"),
     ("reproduce --ground-range -1", "--ground-range"),
+    ("reproduce --pixel-smooth -0.5", "--pixel-smooth"),
     ("reproduce --out {file}", "--out"),
     # bench
     ("bench --only foo", "--only"),

@@ -26,3 +26,11 @@ def test_ground_mask_hides_the_near_ground_only() -> None:
 def test_unknown_extractor_is_named() -> None:
     with pytest.raises(ValueError, match="sift"):
         make_extractor("sift", "perspective", "route", 8, 32)
+
+
+def test_pixel_smooth_reaches_both_pixel_pca_rows_only() -> None:
+    plain = make_extractor("pixel_pca", "perspective", "route", 8, 32, smooth=0.7)
+    masked = make_extractor("pixel_pca_masked", "perspective", "route", 8, 32, smooth=0.7)
+    assert plain.smooth == masked.smooth == 0.7
+    assert masked.mask is not None
+    assert make_extractor("pixel_pca", "perspective", "route", 8, 32).smooth == 0.0
