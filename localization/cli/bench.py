@@ -200,6 +200,9 @@ def _check_appearance_bench(c: AppearanceBenchConfig) -> None:
                   non_negative=("motion_noise", "seed", "forward_ridge", "verify", "turns",
                                 "familiar_novelty", "smooth"),
                   prefix="appearance_")
+    if c.smooth > 0 and c.features != "pixel_pca":
+        raise UsageError("appearance_smooth", f"blurs PixelPCA's images only; with "
+                         f"--appearance-features {c.features} it would do nothing")
     if not (c.verify_margin >= 1.0 and math.isfinite(c.verify_margin)):
         raise UsageError("appearance_verify_margin", "must be >= 1 (a candidate must explain "
                          f"the image at least as well as psi*), got {c.verify_margin!r}")

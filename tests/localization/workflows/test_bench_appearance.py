@@ -144,6 +144,7 @@ def test_targets_are_the_issues():
     ("patch_floor", 0.0, "--appearance-patch-floor"),
     ("smooth", -1.0, "--appearance-smooth"),
     ("smooth_trainings", "nightly", "--appearance-smooth-trainings"),
+    ("smooth", float("inf"), "--appearance-smooth"),
     ("map_camera", "lens", "--appearance-map-camera"),
     ("familiar_novelty", -1.0, "--appearance-familiar-novelty"),
 ])
@@ -151,6 +152,14 @@ def test_bad_options_are_named(field, value, option):
     args = Args(only="appearance", appearance=AppearanceBenchConfig(**{field: value}))
     with pytest.raises(UsageError, match=option):
         check(args)
+
+
+def test_smooth_with_the_small_cnn_is_refused_not_ignored():
+    args = Args(only="appearance",
+                appearance=AppearanceBenchConfig(smooth=0.7, features="small_cnn"))
+    with pytest.raises(UsageError, match="--appearance-smooth.*PixelPCA"):
+        check(args)
+    check(Args(only="appearance", appearance=AppearanceBenchConfig(smooth=0.7)))
 
 
 def test_registered_for_bench_only_appearance():
