@@ -114,6 +114,22 @@ class City(CityModelMixin):
         hit = (fp[:, 0] - margin < x) & (x < fp[:, 2] + margin) & (fp[:, 1] - margin < y) & (y < fp[:, 3] + margin)
         return ok & ~hit.any(axis=1)
 
+    def clearance(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Distance (m) from each of the (n, 2) points to the nearest building or the city's
+        edge, (n,): negative inside a building or outside the city, NaN for a non-finite
+        point. ``clearance(p) >= margin`` wherever ``free_mask(p, margin)`` (which grows the
+        buildings by squares, not discs: beside a corner it is stricter)."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        edge = self.half - np.max(np.abs(p), axis=1)
+        fp = self._fp
+        if len(fp) == 0:
+            return edge
+        dx = np.maximum(fp[None, :, 0] - p[:, :1], p[:, :1] - fp[None, :, 2])
+        dy = np.maximum(fp[None, :, 1] - p[:, 1:], p[:, 1:] - fp[None, :, 3])
+        outside = np.hypot(np.maximum(dx, 0.0), np.maximum(dy, 0.0))
+        box = np.where((dx <= 0) & (dy <= 0), np.maximum(dx, dy), outside)
+        return np.minimum(edge, box.min(axis=1))
+
     @property
     def _fp(self) -> NDArray[np.float64]:
         cached = getattr(self, "_fp_cache", None)

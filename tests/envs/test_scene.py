@@ -62,3 +62,18 @@ def test_mjcf_compiles():
     model = mujoco.MjModel.from_xml_string(generate_city(0).to_mjcf())
     assert model.ngeom < 80
     assert model.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+
+
+def test_clearance_agrees_with_free_mask():
+    city = generate_city(0)
+    rng = np.random.default_rng(0)
+    points = rng.uniform(-city.half - 1, city.half + 1, size=(4000, 2))
+    c = city.clearance(points)
+    for margin in (0.0, 0.22, 0.5):
+        free = city.free_mask(points, margin)
+        assert np.all(c[free] >= margin - 1e-12)
+        # free_mask grows each building by a square of margin: its corners reach margin * sqrt 2
+        assert np.all(free[c > margin * np.sqrt(2) + 1e-9])
+    x0, y0, x1, y1 = city.footprints()[0]
+    inside = np.array([[0.5 * (x0 + x1), 0.5 * (y0 + y1)]])
+    assert city.clearance(inside)[0] == pytest.approx(-0.5 * min(x1 - x0, y1 - y0))
