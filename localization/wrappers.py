@@ -203,7 +203,9 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
     "relocalizing", :data:`~localization.filtering.divergence.BELIEF_STATUSES`; "doubtful":
     this image alone disagrees with the belief, from the particles or the EKF with
     ``detect_divergence``), ``hypotheses``
-    (``{"weights": (k,), "means": (k, 3)}``, heaviest first; one for the EKF) and ``nees``
+    (``{"weights": (k,), "means": (k, 3)}``, heaviest first; one for the EKF),
+    ``image_pose`` (psi*(w), the pose this image alone says (3,), by the map in charge at the
+    belief; NaN outside the training domain) and ``nees``
     (from ``info["pose"]``, for evaluation only).
     """
 
@@ -288,7 +290,7 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         if isinstance(self.belief, ParticleBelief) and seed is not None and not self._seeded:
             self.belief.rng = np.random.default_rng([seed, 0x5EED])
         status = self.belief.reset(w, mode=localize)
-        self._publish(info, np.nan, status)
+        self._publish(info, np.nan, status, w)
         return self.observation(obs), info
 
     def step(self, action: Any) -> tuple[dict[str, Any], SupportsFloat, bool, bool,
@@ -300,7 +302,7 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         w = self.localizer.transform(obs["image"])[0]
         nis, status = self.belief.step(self._control(action), w, contact=_contact(info),
                                        bearing=info.get("collision_bearing"))
-        self._publish(info, nis if self.filter == "ekf" else np.nan, status)
+        self._publish(info, nis if self.filter == "ekf" else np.nan, status, w)
         return self.observation(obs), reward, terminated, truncated, info
 
     @property
@@ -321,8 +323,11 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         """The first status line of :meth:`render`'s frames."""
         return f"{self.filter} belief"
 
-    def _publish(self, info: dict[str, Any], nis: float, status: str) -> None:
+    def _publish(self, info: dict[str, Any], nis: float, status: str, w: Array) -> None:
         self.mean, self.cov = self.belief.x, self.belief.P
+        maps = self.localizer.local(self.mean, w) if isinstance(
+            self.localizer, DistrictLocalizer) else self.localizer
+        info["image_pose"] = maps.measure(w, "pose")
         self.belief_status = self.belief.belief_status
         info["nis"] = float(nis)
         info["nis_dof"] = self._dof

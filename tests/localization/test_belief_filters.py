@@ -52,6 +52,20 @@ def test_particles_have_the_ekf_observation_space_and_report_hypotheses(localize
     assert ekf.hypotheses["weights"].tolist() == [1.0]
 
 
+@pytest.mark.parametrize("filter", ["ekf", "particles"])
+def test_info_has_the_images_own_pose(localizer, filter):
+    """``info["image_pose"]`` is psi*(w) of the step's image: what the maps alone read."""
+    env = BeliefWrapper(make_env(max_episode_steps=30), localizer, keep_image=True,
+                        filter=filter, filter_options=PF if filter == "particles" else None)
+    obs, info = env.reset(seed=3, options={"pose": start_pose(env)})
+    for _ in range(4):
+        w = localizer.transform(obs["image"][None])[0]
+        np.testing.assert_allclose(info["image_pose"], localizer.measure(w, "pose"))
+        obs, _, _, _, info = env.step([0.5, 0.0])
+    assert np.hypot(*(info["image_pose"][:2] - info["pose"][:2])) < 1.0
+    env.close()
+
+
 def test_global_reset_and_seeds(localizer):
     runs = []
     for seed in (4, 4, 5):
