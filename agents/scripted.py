@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from agents.guard import ImageGuard
 from agents.planner import (
     BELIEF_OUTSIDE_FRACTION,
     PlannedPath,
@@ -158,6 +159,8 @@ class ScriptedAgent:
     back_off_speed : float — reversing speed (m/s).
     look_rate : float — turn rate (rad/s) while it looks around, lost.
     look_dwell : int — steps it looks along each street axis while lost.
+    guard : bool — veto driving forward into a building from where the latest image alone
+        puts the robot (``info["image_pose"]``, :class:`~agents.guard.ImageGuard`).
 
     Notes
     -----
@@ -181,10 +184,13 @@ class ScriptedAgent:
                  turn_in_place: float = 0.6, replan_distance: float = 1.0,
                  look_rate: float = 0.5, slow_factor: float = 0.25, plan: str = "drive",
                  back_off_steps: int = 5, back_off_speed: float = 0.3,
-                 look_dwell: int = 10) -> None:
+                 look_dwell: int = 10, guard: bool = False) -> None:
         self.navigator = Navigator(city, replan_distance, plan)
         self.recovery = Recovery(w_max, back_off_steps, back_off_speed, look_rate, look_dwell)
         self.slow_factor = check_real(slow_factor, "slow_factor", low=0.0, high=1.0)
+        if not isinstance(guard, (bool, np.bool_)):
+            raise TypeError(f"guard must be a bool, got {guard!r}")
+        self.guard = ImageGuard(city) if guard else None
         self.lookahead, self.speed, self.w_max, self.turn_in_place = (
             check_real(v, name, low=0.0, low_open=True) for name, v in (
                 ("lookahead", lookahead), ("speed", speed), ("w_max", w_max),
@@ -213,4 +219,6 @@ class ScriptedAgent:
                          self.w_max, self.turn_in_place)
         if info is not None and info.get("belief_status") in SLOW_STATUSES:
             u[0] *= self.slow_factor
+        if self.guard is not None:
+            u = self.guard.filter(u, mean, info)
         return u.astype(np.float32)

@@ -208,7 +208,7 @@ def belief_options(args: RobustnessConfig, source: str, condition: str = "nomina
 def make_agent(args: RobustnessConfig, agent: str, source: str, city: Any) -> Any:
     """The scripted navigator, or the PPO policy trained on the row's kind of pose."""
     if agent == "scripted":
-        return ScriptedAgent(city)
+        return ScriptedAgent(city, guard=args.guard)
     from agents.ppo import PPOAgent
 
     return PPOAgent.load(policy_path(args, source), city)
@@ -239,6 +239,7 @@ def task_path(task: RobustTask) -> Path:
     name = (f"{task.agent}_{task.source}_{task.condition}_{task.city}_{task.seeds[0]}-"
             f"{task.seeds[-1]}_{task.config.image_size}px_{task.config.max_steps}"
             f"{'_detect' if 'filter_options' in options else ''}"
+            f"{'_guard' if task.config.guard and task.agent == 'scripted' else ''}"
             f"{_on_daylight(task)}.json")
     return Path(task.config.out_dir) / "robustness" / "episodes" / name
 

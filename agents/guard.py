@@ -1,0 +1,98 @@
+"""A guard against the wall the belief does not see: the image's own pose estimate vetoes
+forward motion into a building.
+
+A robot pushed off its lane keeps a belief that trusts its old lane for a while: the
+measurement noise R is wide (the calibration covers psi*'s slowly varying errors), so the
+belief follows the new images a few centimetres a step, while psi* of each image, the pose
+the image alone says, is already near the truth (docs/benchmarks.md section 11, stop 72). A
+pilot steering on the belief then drives into a wall it does not know is there.
+
+:class:`ImageGuard` checks each command against the map from where the latest image puts the
+robot: the command U = [v, w], held for ``horizon`` seconds from the image's pose
+``info["image_pose"]`` (published by :class:`~localization.wrappers.BeliefWrapper`), must not
+bring the robot's disc (``ROBOT_RADIUS + margin``) closer to a building than it already is
+where that clearance is short. If it would, the pilot does not drive forward this step (v = 0;
+it may still turn). The belief itself is not touched. An image pose farther than ``radius``
+from the belief (an aliased image) or inside a building is ignored.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from envs.robot import ROBOT_RADIUS
+from localization._validation import check_int, check_real
+from localization.geometry import Array
+
+__all__ = ["GUARD_HORIZON", "GUARD_MARGIN", "GUARD_RADIUS", "ImageGuard", "rollout"]
+
+#: s, how far ahead a command is checked
+GUARD_HORIZON = 0.5
+#: m, clearance kept beyond the robot's disc
+GUARD_MARGIN = 0.4
+#: m, image poses farther than this from the belief are taken as aliased and ignored
+GUARD_RADIUS = 3.0
+
+
+def rollout(pose: Array, u: Array, horizon: float, n: int) -> Array:
+    """Positions (n, 2) of a unicycle at ``pose`` [x, y, yaw] under U = [v, w] held for
+    ``horizon`` seconds, at n equal times after the start (exact arcs)."""
+    t = horizon * np.arange(1, n + 1) / n
+    v, w = float(u[0]), float(u[1])
+    yaw = pose[2] + w * t
+    if abs(w) < 1e-9:
+        dx, dy = v * t * np.cos(pose[2]), v * t * np.sin(pose[2])
+    else:
+        dx = v / w * (np.sin(yaw) - np.sin(pose[2]))
+        dy = v / w * (np.cos(pose[2]) - np.cos(yaw))
+    return np.column_stack([pose[0] + dx, pose[1] + dy])
+
+
+class ImageGuard:
+    """Veto forward commands that would take the image's pose into a building.
+
+    Parameters
+    ----------
+    city : envs.scene.City
+        The map (``env.unwrapped.city``).
+    horizon : float — seconds a command is held in the check (> 0).
+    margin : float — metres of clearance beyond ``ROBOT_RADIUS`` (>= 0).
+    radius : float — image poses farther than this (m) from the belief are ignored (> 0).
+    n_points : int — points of the rolled-out arc that are checked (>= 1).
+    """
+
+    def __init__(self, city: Any, horizon: float = GUARD_HORIZON, margin: float = GUARD_MARGIN,
+                 radius: float = GUARD_RADIUS, n_points: int = 5) -> None:
+        self.city = city
+        self.horizon = check_real(horizon, "horizon", low=0.0, low_open=True)
+        self.margin = check_real(margin, "margin", low=0.0)
+        self.radius = check_real(radius, "radius", low=0.0, low_open=True)
+        self.n_points = check_int(n_points, "n_points", low=1)
+        self.vetoes = 0
+
+    def blocks(self, u: Array, mean: Array, info: Mapping[str, Any] | None) -> bool:
+        """Whether the forward command ``u`` (2,) should not be driven, from the belief mean
+        (3,) and the step's ``info`` (its ``image_pose``; no veto without one)."""
+        pose = None if info is None else info.get("image_pose")
+        if pose is None or u[0] <= 0:
+            return False
+        pose = np.asarray(pose, dtype=np.float64)
+        if pose.shape != (3,) or not np.all(np.isfinite(pose)) \
+                or np.hypot(*(pose[:2] - mean[:2])) > self.radius:
+            return False
+        start = float(self.city.clearance(pose[None, :2])[0])
+        if start < 0:
+            return False
+        ahead = float(self.city.clearance(rollout(pose, u, self.horizon, self.n_points)).min())
+        return ahead < ROBOT_RADIUS + self.margin and ahead < start
+
+    def filter(self, u: Array, mean: Array, info: Mapping[str, Any] | None) -> Array:
+        """``u`` with v = 0 when :meth:`blocks` (counted in ``vetoes``)."""
+        if self.blocks(u, mean, info):
+            self.vetoes += 1
+            u = u.copy()
+            u[0] = 0.0
+        return u

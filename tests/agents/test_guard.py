@@ -1,0 +1,78 @@
+"""The image guard: no forward step that the image's own pose estimate says runs into a building."""
+
+import numpy as np
+import pytest
+
+from agents.guard import ImageGuard, rollout
+from agents.scripted import ScriptedAgent
+from envs.robot import ROBOT_RADIUS
+from envs.scene import generate_city
+
+
+@pytest.fixture(scope="module")
+def city():
+    return generate_city(0)
+
+
+@pytest.fixture(scope="module")
+def facing_wall(city):
+    """A pose 0.4 m in front of a building's west face, looking at it (yaw 0)."""
+    for x0, y0, x1, y1 in city.footprints():
+        pose = np.array([x0 - 0.4, 0.5 * (y0 + y1), 0.0])
+        if abs(city.clearance(pose[None, :2])[0] - 0.4) < 1e-9:
+            return pose
+    raise AssertionError("no building face with 0.4 m of street in front of it")
+
+
+def test_rollout_straight_and_arc():
+    np.testing.assert_allclose(rollout(np.array([1.0, 2.0, np.pi / 2]), np.array([1.0, 0.0]),
+                                       2.0, 2), [[1, 3], [1, 4]], atol=1e-12)
+    # a quarter circle of radius 1 from the origin heading +x, turning left
+    end = rollout(np.zeros(3), np.array([1.0, 1.0]), np.pi / 2, 4)[-1]
+    np.testing.assert_allclose(end, [1.0, 1.0], atol=1e-12)
+
+
+def test_blocks_forward_into_the_wall_only(city, facing_wall):
+    guard = ImageGuard(city)
+    info = {"image_pose": facing_wall}
+    belief = facing_wall + [0.0, 1.3, 0.0]  # the belief 1.3 m off, as after a push
+    assert guard.blocks(np.array([0.9, 0.0]), belief, info)
+    away = {"image_pose": facing_wall + [0.0, 0.0, np.pi]}
+    assert not guard.blocks(np.array([0.9, 0.0]), belief, away)
+    assert not guard.blocks(np.array([-0.3, 0.0]), belief, info)  # reversing is not vetoed
+    assert not guard.blocks(np.array([0.0, 1.0]), belief, info)  # nor turning on the spot
+    assert not guard.blocks(np.array([0.9, 0.0]), belief, None)  # no image pose: no veto
+    assert not guard.blocks(np.array([0.9, 0.0]), belief, {"image_pose": np.full(3, np.nan)})
+    far = facing_wall + [0.0, 4.0, 0.0]  # an aliased image pose is ignored
+    assert not guard.blocks(np.array([0.9, 0.0]), far, info)
+
+
+def test_slow_enough_is_allowed(city, facing_wall):
+    """0.1 m in half a second keeps the disc off the wall (0.4 - 0.1 > ROBOT_RADIUS + 0.05)."""
+    assert 0.4 - 0.1 > ROBOT_RADIUS + 0.05
+    assert not ImageGuard(city).blocks(np.array([0.2, 0.0]), facing_wall,
+                                       {"image_pose": facing_wall})
+
+
+def test_scripted_agent_stops_short_of_the_wall(city, facing_wall):
+    goal = facing_wall[:2] + [-6.0, 0.0]
+    belief = {"pose_mean": facing_wall + [0.0, 0.0, np.pi], "pose_cov": np.ones(6) * 0.01,
+              "goal": goal}
+    info = {"belief_status": "tracking", "image_pose": facing_wall}
+    guarded, plain = ScriptedAgent(city, guard=True), ScriptedAgent(city)
+    u_plain = plain.act(belief, info)
+    assert u_plain[0] > 0  # the belief faces the goal down the street
+    u = guarded.act(belief, info)
+    assert u[0] == 0.0 and u[1] == pytest.approx(u_plain[1])
+    assert guarded.guard.vetoes == 1
+    info["image_pose"] = belief["pose_mean"]  # the image agrees with the belief: no veto
+    assert guarded.act(belief, info)[0] > 0
+
+
+def test_bad_settings(city):
+    with pytest.raises(TypeError, match="guard must be a bool"):
+        ScriptedAgent(city, guard="yes")
+    with pytest.raises(ValueError, match="horizon"):
+        ImageGuard(city, horizon=0.0)
+    with pytest.raises(ValueError, match="radius"):
+        ImageGuard(city, radius=-1.0)
