@@ -31,7 +31,10 @@ __all__ = ["GUARD_HORIZON", "GUARD_MARGIN", "GUARD_RADIUS", "ImageGuard", "rollo
 
 #: s, how far ahead a command is checked
 GUARD_HORIZON = 0.5
-#: m, clearance kept beyond the robot's disc
+#: m, clearance kept beyond the robot's disc: psi* cannot read a robot closer to a wall than
+#: the map's images were (POSE_MARGIN, 0.32 m), and near a wall it reads 0.3-0.5 m farther out
+#: than the truth, so the guard must act while psi* is still within that reach (0.05 m missed
+#: every wall on tuning city 14; 0.4 m halved the pushed contacts on tuning cities 13-14)
 GUARD_MARGIN = 0.4
 #: m, image poses farther than this from the belief are taken as aliased and ignored
 GUARD_RADIUS = 3.0

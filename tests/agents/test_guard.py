@@ -47,11 +47,13 @@ def test_blocks_forward_into_the_wall_only(city, facing_wall):
     assert not guard.blocks(np.array([0.9, 0.0]), far, info)
 
 
-def test_slow_enough_is_allowed(city, facing_wall):
-    """0.1 m in half a second keeps the disc off the wall (0.4 - 0.1 > ROBOT_RADIUS + 0.05)."""
+def test_the_margin_sets_how_far_ahead_a_wall_counts(city, facing_wall):
+    """0.4 m from the wall: with a 0.05 m margin a slow step (0.1 m in the horizon) keeps the
+    disc off the wall and passes; the default margin (the map's reach) stops it already."""
     assert 0.4 - 0.1 > ROBOT_RADIUS + 0.05
-    assert not ImageGuard(city).blocks(np.array([0.2, 0.0]), facing_wall,
-                                       {"image_pose": facing_wall})
+    info, slow = {"image_pose": facing_wall}, np.array([0.2, 0.0])
+    assert not ImageGuard(city, margin=0.05).blocks(slow, facing_wall, info)
+    assert ImageGuard(city).blocks(slow, facing_wall, info)
 
 
 def test_scripted_agent_stops_short_of_the_wall(city, facing_wall):
