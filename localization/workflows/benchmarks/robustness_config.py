@@ -101,7 +101,7 @@ class RobustnessConfig:
                 "building. On since stop 72, chosen on tuning cities 13-14 (200 episodes per "
                 "row: pushed contact steps per episode 0.255 -> 0.125 on the EKF, 0.305 -> 0.150 "
                 "on the particles; nominal success 1.00 and no contact either way, time to goal "
-                "+0.3 / +1.6 %); off: the agent steers on the belief alone"})
+                "+0.3 / +0.9 %); off: the agent steers on the belief alone"})
     workers: int = field(default=1, metadata={"help": WORKERS_HELP})
     ray_address: str = field(default="", metadata={"help": RAY_ADDRESS_HELP})
     reuse_localizers: bool = field(default=False, metadata={
