@@ -9,7 +9,7 @@ pilot steering on the belief then drives into a wall it does not know is there.
 
 :class:`ImageGuard` checks each command against the map from where the latest image puts the
 robot: the command U = [v, w], held for ``horizon`` seconds from the image's pose
-``info["image_pose"]`` (published by :class:`~localization.wrappers.BeliefWrapper`), must not
+``info["image_pose"]`` (published by ``BeliefWrapper(..., image_pose=True)``), must not
 bring the robot's disc (``ROBOT_RADIUS + margin``) closer to a building than it already is
 where that clearance is short. If it would, the pilot does not drive forward this step (v = 0;
 it may still turn). The belief itself is not touched. An image pose farther than ``radius``
@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from envs.motion_model import UnicycleModel
 from envs.robot import ROBOT_RADIUS
 from localization._validation import check_int, check_real
 from localization.geometry import Array
@@ -41,17 +42,14 @@ GUARD_RADIUS = 3.0
 
 
 def rollout(pose: Array, u: Array, horizon: float, n: int) -> Array:
-    """Positions (n, 2) of a unicycle at ``pose`` [x, y, yaw] under U = [v, w] held for
-    ``horizon`` seconds, at n equal times after the start (exact arcs)."""
-    t = horizon * np.arange(1, n + 1) / n
-    v, w = float(u[0]), float(u[1])
-    yaw = pose[2] + w * t
-    if abs(w) < 1e-9:
-        dx, dy = v * t * np.cos(pose[2]), v * t * np.sin(pose[2])
-    else:
-        dx = v / w * (np.sin(yaw) - np.sin(pose[2]))
-        dy = v / w * (np.cos(pose[2]) - np.cos(yaw))
-    return np.column_stack([pose[0] + dx, pose[1] + dy])
+    """Positions (n, 2) of the known motion model F (the unicycle, exact arcs) from ``pose``
+    [x, y, yaw] under U = [v, w] held for ``horizon`` seconds, at n equal times after the
+    start."""
+    F, out = UnicycleModel(horizon / n), []
+    for _ in range(n):
+        pose = F.predict(pose, u)
+        out.append(pose[:2])
+    return np.array(out)
 
 
 class ImageGuard:
@@ -79,9 +77,12 @@ class ImageGuard:
     def blocks(self, u: Array, mean: Array, info: Mapping[str, Any] | None) -> bool:
         """Whether the forward command ``u`` (2,) should not be driven, from the belief mean
         (3,) and the step's ``info`` (its ``image_pose``; no veto without one)."""
-        pose = None if info is None else info.get("image_pose")
-        if pose is None or u[0] <= 0:
+        if info is None or u[0] <= 0:
             return False
+        if "image_pose" not in info:
+            raise KeyError("the image guard needs info['image_pose']: wrap the env in "
+                           "BeliefWrapper(..., image_pose=True)")
+        pose = info["image_pose"]
         pose = np.asarray(pose, dtype=np.float64)
         if pose.shape != (3,) or not np.all(np.isfinite(pose)) \
                 or np.hypot(*(pose[:2] - mean[:2])) > self.radius:

@@ -25,7 +25,7 @@ from agents.planner import (
 )
 from agents.recovery import LOOK_TOLERANCE, STOP_STATUSES, Recovery, street_axis
 from envs.driving import bearing, pursuit_turn_rate
-from localization._validation import check_array, check_real
+from localization._validation import check_array, check_bool, check_real
 from localization.geometry import Array
 
 __all__ = ["BELIEF_KEYS", "LOOK_TOLERANCE", "PLANS", "SLOW_STATUSES", "STOP_STATUSES", "Navigator",
@@ -188,9 +188,7 @@ class ScriptedAgent:
         self.navigator = Navigator(city, replan_distance, plan)
         self.recovery = Recovery(w_max, back_off_steps, back_off_speed, look_rate, look_dwell)
         self.slow_factor = check_real(slow_factor, "slow_factor", low=0.0, high=1.0)
-        if not isinstance(guard, (bool, np.bool_)):
-            raise TypeError(f"guard must be a bool, got {guard!r}")
-        self.guard = ImageGuard(city) if guard else None
+        self.guard = ImageGuard(city) if check_bool(guard, "guard") else None
         self.lookahead, self.speed, self.w_max, self.turn_in_place = (
             check_real(v, name, low=0.0, low_open=True) for name, v in (
                 ("lookahead", lookahead), ("speed", speed), ("w_max", w_max),

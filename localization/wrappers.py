@@ -178,6 +178,8 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
     allow_other_city : bool
         Run a localizer fitted on another city (refused by default with
         :class:`~localization.localizer.OtherCityError`: the maps would alias silently).
+    image_pose : bool
+        Publish ``info["image_pose"]``, psi* of each image (for ``agents.ImageGuard``).
     filter_options : dict, optional
         More settings of the filter (``FILTER_OPTIONS[filter]``): for "ekf"
         ``detect_divergence`` (True: the EKF notices when it is lost and restarts where
@@ -204,8 +206,8 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
     this image alone disagrees with the belief, from the particles or the EKF with
     ``detect_divergence``), ``hypotheses``
     (``{"weights": (k,), "means": (k, 3)}``, heaviest first; one for the EKF),
-    ``image_pose`` (psi*(w), the pose this image alone says (3,), by the map in charge at the
-    belief; NaN outside the training domain) and ``nees``
+    with ``image_pose=True`` ``image_pose`` (psi*(w), the pose this image alone says (3,), by
+    the map in charge at the belief; NaN outside the training domain) and ``nees``
     (from ``info["pose"]``, for evaluation only).
     """
 
@@ -214,7 +216,7 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
                  gate_probability: float | None = 0.997, relocalize_after: int | None = 50,
                  inflate_after: int | None = 3, filter: str = "ekf",
                  filter_options: dict[str, Any] | None = None,
-                 allow_other_city: bool = False) -> None:
+                 allow_other_city: bool = False, image_pose: bool = False) -> None:
         # the spec refers to the localizer, as a scikit-learn meta-estimator does: Gymnasium's
         # deep copies duplicated it in every wrapper (1.1 GB a wrapper of a 60 m map); the
         # options dict is copied, its values (a free-space mask of the city, ...) are not
@@ -223,7 +225,7 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
             gate_probability=gate_probability, relocalize_after=relocalize_after,
             inflate_after=inflate_after, filter=filter, filter_options=dict(filter_options)
             if isinstance(filter_options, Mapping) else filter_options,
-            allow_other_city=allow_other_city, _disable_deepcopy=True)
+            allow_other_city=allow_other_city, image_pose=image_pose, _disable_deepcopy=True)
         self._saved_kwargs = _SharedKwargs(self._saved_kwargs)
         check_choice(measurement, "measurement", MEASUREMENTS)
         check_choice(filter, "filter", FILTERS)
@@ -235,6 +237,7 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         localizer.check_city(city_info(env), allow_other_city=check_bool(
             allow_other_city, "allow_other_city"))
         self.localizer = localizer
+        self.image_pose = check_bool(image_pose, "image_pose")
         self.measurement = measurement
         self.filter = filter
         mm = env.unwrapped.motion_model
@@ -325,9 +328,10 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
 
     def _publish(self, info: dict[str, Any], nis: float, status: str, w: Array) -> None:
         self.mean, self.cov = self.belief.x, self.belief.P
-        maps = self.localizer.local(self.mean, w) if isinstance(
-            self.localizer, DistrictLocalizer) else self.localizer
-        info["image_pose"] = maps.measure(w, "pose")
+        if self.image_pose:  # one more GSE query a step (0.5 ms on a 40000-image map): asked for
+            maps = self.localizer.local(self.mean, w) if isinstance(
+                self.localizer, DistrictLocalizer) else self.localizer
+            info["image_pose"] = maps.measure(w, "pose")
         self.belief_status = self.belief.belief_status
         info["nis"] = float(nis)
         info["nis_dof"] = self._dof

@@ -41,7 +41,9 @@ def test_blocks_forward_into_the_wall_only(city, facing_wall):
     assert not guard.blocks(np.array([0.9, 0.0]), belief, away)
     assert not guard.blocks(np.array([-0.3, 0.0]), belief, info)  # reversing is not vetoed
     assert not guard.blocks(np.array([0.0, 1.0]), belief, info)  # nor turning on the spot
-    assert not guard.blocks(np.array([0.9, 0.0]), belief, None)  # no image pose: no veto
+    assert not guard.blocks(np.array([0.9, 0.0]), belief, None)  # no info: no veto
+    with pytest.raises(KeyError, match="image_pose=True"):  # info without it: said, not ignored
+        guard.blocks(np.array([0.9, 0.0]), belief, {"belief_status": "tracking"})
     assert not guard.blocks(np.array([0.9, 0.0]), belief, {"image_pose": np.full(3, np.nan)})
     far = facing_wall + [0.0, 4.0, 0.0]  # an aliased image pose is ignored
     assert not guard.blocks(np.array([0.9, 0.0]), far, info)
@@ -72,7 +74,7 @@ def test_scripted_agent_stops_short_of_the_wall(city, facing_wall):
 
 
 def test_bad_settings(city):
-    with pytest.raises(TypeError, match="guard must be a bool"):
+    with pytest.raises(TypeError, match="guard must be True or False"):
         ScriptedAgent(city, guard="yes")
     with pytest.raises(ValueError, match="horizon"):
         ImageGuard(city, horizon=0.0)

@@ -55,8 +55,11 @@ def test_particles_have_the_ekf_observation_space_and_report_hypotheses(localize
 @pytest.mark.parametrize("filter", ["ekf", "particles"])
 def test_info_has_the_images_own_pose(localizer, filter):
     """``info["image_pose"]`` is psi*(w) of the step's image: what the maps alone read."""
+    plain = BeliefWrapper(make_env(max_episode_steps=30), localizer)
+    assert "image_pose" not in plain.reset(seed=3, options={"pose": start_pose(plain)})[1]
     env = BeliefWrapper(make_env(max_episode_steps=30), localizer, keep_image=True,
-                        filter=filter, filter_options=PF if filter == "particles" else None)
+                        filter=filter, filter_options=PF if filter == "particles" else None,
+                        image_pose=True)
     obs, info = env.reset(seed=3, options={"pose": start_pose(env)})
     for _ in range(4):
         w = localizer.transform(obs["image"][None])[0]

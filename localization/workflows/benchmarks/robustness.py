@@ -197,7 +197,7 @@ def belief_options(args: RobustnessConfig, source: str, condition: str = "nomina
     map: the randomised localizer of experiences has several, which the monitor refuses."""
     if source not in FILTERS:
         return {}
-    options: dict[str, Any] = {"filter": FILTERS[source]}
+    options: dict[str, Any] = {"filter": FILTERS[source], "image_pose": args.guard}
     one_map = (training_of(condition, args.moving_localizer) == "daylight"
                or args.randomised_map != "experiences")
     if source == "ekf" and args.detect_divergence and one_map:
@@ -208,7 +208,7 @@ def belief_options(args: RobustnessConfig, source: str, condition: str = "nomina
 def make_agent(args: RobustnessConfig, agent: str, source: str, city: Any) -> Any:
     """The scripted navigator, or the PPO policy trained on the row's kind of pose."""
     if agent == "scripted":
-        return ScriptedAgent(city, guard=args.guard)
+        return ScriptedAgent(city, guard=args.guard and source in FILTERS)
     from agents.ppo import PPOAgent
 
     return PPOAgent.load(policy_path(args, source), city)
@@ -239,7 +239,7 @@ def task_path(task: RobustTask) -> Path:
     name = (f"{task.agent}_{task.source}_{task.condition}_{task.city}_{task.seeds[0]}-"
             f"{task.seeds[-1]}_{task.config.image_size}px_{task.config.max_steps}"
             f"{'_detect' if 'filter_options' in options else ''}"
-            f"{'_guard' if task.config.guard and task.agent == 'scripted' else ''}"
+            f"{'_guard' if options.get('image_pose') and task.agent == 'scripted' else ''}"
             f"{_on_daylight(task)}.json")
     return Path(task.config.out_dir) / "robustness" / "episodes" / name
 

@@ -190,14 +190,17 @@ def test_detect_divergence_applies_to_the_ekf_rows_and_keys_their_records() -> N
         task_path,
     )
 
-    plain, detect = RobustnessConfig(detect_divergence=False), RobustnessConfig()
-    assert belief_options(plain, "ekf") == {"filter": "ekf"}
-    assert belief_options(detect, "ekf") == {"filter": "ekf",
+    plain = RobustnessConfig(detect_divergence=False, guard=False)
+    detect = RobustnessConfig(guard=False)
+    assert belief_options(plain, "ekf") == {"filter": "ekf", "image_pose": False}
+    # the scripted agent's guard reads psi* of each image: the belief publishes it then only
+    assert belief_options(RobustnessConfig(), "particles")["image_pose"] is True
+    assert belief_options(detect, "ekf") == {"filter": "ekf", "image_pose": False,
                                              "filter_options": {"detect_divergence": True}}
-    assert belief_options(detect, "particles") == {"filter": "particles"}
+    assert belief_options(detect, "particles") == {"filter": "particles", "image_pose": False}
     # the randomised localizer of experiences has several maps: no monitor there
     assert belief_options(detect, "ekf", "traffic") == belief_options(detect, "ekf", "night") \
-        == {"filter": "ekf"}
+        == {"filter": "ekf", "image_pose": False}
     assert belief_options(detect, "ekf", "push") == belief_options(detect, "ekf")
     assert belief_options(detect, "oracle") == {}
     names = {task_path(RobustTask(config, 21, "nominal", source, "scripted", (1, 2))).name
