@@ -9,14 +9,57 @@ from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
-from sklearn.model_selection import GridSearchCV, KFold
-from sklearn.neighbors import KNeighborsRegressor
+from sklearn.model_selection import KFold
+from sklearn.neighbors import KNeighborsRegressor, NearestNeighbors
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from localization.baselines._base import _PoseRegressorBase
 from localization.geometry import Array
 
-__all__ = ["RetrievalRegressor"]
+__all__ = ["RetrievalRegressor", "cv_neighbor_errors"]
+
+
+def neighbor_mean(dist: Array, Y: Array, weights: str) -> Array:
+    """The prediction of ``KNeighborsRegressor`` from its neighbours: the mean of the rows of
+    ``Y`` (q, k, p), weighted by ``1 / dist`` (q, k) for ``weights="distance"`` (a row with
+    a zero distance keeps only its zero-distance neighbours, as scikit-learn does)."""
+    if weights == "uniform":
+        return Y.mean(axis=1)
+    with np.errstate(divide="ignore"):
+        inv = 1.0 / dist
+    exact = np.isinf(inv)
+    rows = exact.any(axis=1)
+    inv[rows] = exact[rows]
+    return np.einsum("qk,qkp->qp", inv, Y) / inv.sum(axis=1)[:, None]
+
+
+def cv_neighbor_errors(X: Array, Y: Array, ks: Sequence[int], weights: str,
+                       folds: KFold, algorithm: str = "brute") -> Array:
+    """Mean squared error of k-nearest-neighbour regression for every k in ``ks``, averaged
+    over the ``folds`` of (X, Y): what ``GridSearchCV`` over ``n_neighbors`` reports (as
+    ``-mean_test_score``), from one neighbour query of ``max(ks)`` per fold instead of one
+    per k (the k nearest are the first k of the ``max(ks)`` nearest).
+
+    Parameters
+    ----------
+    X : ndarray of shape (n, n_features)
+    Y : ndarray of shape (n, n_outputs)
+    ks : sequence of int, each in [1, the smallest training fold]
+    weights : {"distance", "uniform"}
+    folds : a scikit-learn splitter
+
+    Returns
+    -------
+    ndarray of shape (len(ks),)
+    """
+    errors = np.zeros(len(ks))
+    for train, test in folds.split(X):
+        index = NearestNeighbors(n_neighbors=max(ks), algorithm=algorithm).fit(X[train])
+        dist, ind = index.kneighbors(X[test])
+        for j, k in enumerate(ks):
+            pred = neighbor_mean(dist[:, :k], Y[train][ind[:, :k]], weights)
+            errors[j] += np.mean((pred - Y[test]) ** 2)
+    return errors / folds.get_n_splits()
 
 
 class RetrievalRegressor(_PoseRegressorBase):
@@ -29,8 +72,9 @@ class RetrievalRegressor(_PoseRegressorBase):
     ----------
     n_neighbors : int or "cv", default=1
         Number of neighbours, or ``"cv"`` to choose it from ``k_grid`` by
-        ``GridSearchCV`` (``cv``-fold shuffled KFold, mean squared error of the
-        encoded outputs) on the training set.
+        ``cv``-fold shuffled KFold cross-validation (mean squared error of the encoded
+        outputs, as ``GridSearchCV`` scores it; one neighbour query per fold serves every
+        k: :func:`cv_neighbor_errors`) on the training set.
     weights : {"distance", "uniform"}, default="distance"
         Passed to ``KNeighborsRegressor`` (a query equal to a training point
         returns that point's target).
@@ -108,14 +152,11 @@ class RetrievalRegressor(_PoseRegressorBase):
             if not ks:
                 raise ValueError(f"no k in k_grid={tuple(self.k_grid)} fits {n_fit} samples "
                                  "per fold")
-            search = GridSearchCV(KNeighborsRegressor(weights=self.weights,
-                                                      algorithm=self.algorithm),
-                                  {"n_neighbors": ks}, scoring="neg_mean_squared_error",
-                                  cv=KFold(self.cv, shuffle=True, random_state=self.random_state))
-            search.fit(Xs, E)
-            k = int(search.best_params_["n_neighbors"])
+            errors = cv_neighbor_errors(Xs, E, ks, self.weights, KFold(
+                self.cv, shuffle=True, random_state=self.random_state), self.algorithm)
+            k = ks[int(np.argmin(errors))]
             self.cv_k_ = ks
-            self.cv_scores_ = (-search.cv_results_["mean_test_score"]).tolist()
+            self.cv_scores_ = errors.tolist()
         elif isinstance(self.n_neighbors, (int, np.integer)) and not isinstance(self.n_neighbors,
                                                                                 bool):
             k = int(self.n_neighbors)

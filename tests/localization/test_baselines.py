@@ -5,6 +5,8 @@ import warnings
 import numpy as np
 import pytest
 from sklearn.exceptions import NotFittedError
+from sklearn.model_selection import GridSearchCV, KFold
+from sklearn.neighbors import KNeighborsRegressor
 from threadpoolctl import threadpool_limits
 
 from localization.baselines import KernelRegressor, RetrievalRegressor
@@ -89,6 +91,24 @@ def test_retrieval_cv_and_accuracy():
     pred = model.predict(Wt)
     assert rrmse(pred, Tt, columns=(0, 1)) < 0.2
     assert np.all(np.abs(pred[:, 2]) <= np.pi)
+
+
+@pytest.mark.parametrize("weights", ["distance", "uniform"])
+def test_retrieval_cv_scores_equal_grid_search(weights):
+    """One neighbour query per fold gives GridSearchCV's scores for every k (and its k),
+    also when a query repeats a training sample (zero distance; tied neighbours with
+    different poses may come in either order, so the repeats carry their poses too)."""
+    W, E, _ = regression_manifold(300, dim_theta=2, m=12, seed=3)
+    W[150:160], E[150:160] = W[:10], E[:10]
+    model = RetrievalRegressor(n_neighbors="cv", weights=weights, periodic=(), random_state=4)
+    model.fit(W, E)
+    Ws = (W - model.mean_) / model.scale_
+    search = GridSearchCV(KNeighborsRegressor(weights=weights, algorithm="brute"),
+                          {"n_neighbors": model.cv_k_}, scoring="neg_mean_squared_error",
+                          cv=KFold(5, shuffle=True, random_state=4)).fit(Ws, E)
+    np.testing.assert_allclose(model.cv_scores_, -search.cv_results_["mean_test_score"],
+                               rtol=1e-10)
+    assert model.n_neighbors_ == search.best_params_["n_neighbors"]
 
 
 @pytest.mark.parametrize("make", [
