@@ -45,9 +45,11 @@ demo: setup
 
 # One BLAS / OpenMP / torch thread per xdist worker: two workers with two threads each on two
 # cores oversubscribe them (the suite took 14.5 min; 10.5 min on one thread each, stop 62),
-# and the results no longer depend on the machine's core count.
+# and the results no longer depend on the machine's core count. The 15 slowest tests are listed
+# at the end, so a test that grows shows in the CI log (stop 73: one took 457 of the suite's
+# 877 s on a default-sized fit it did not need).
 test: setup
-	OMP_NUM_THREADS=1 $(RUN) -m pytest -n 2 -q
+	OMP_NUM_THREADS=1 $(RUN) -m pytest -n 2 -q --durations=15
 
 # the agents benchmark fits its street-surface localizers itself (results/localizers_free);
 # the robustness rows run its PPO policies (results/agents) beside the scripted agent,

@@ -162,8 +162,8 @@ def test_targets_from_rows() -> None:
 def test_parallel_episodes_equal_the_serial_run(tmp_path: Path) -> None:
     args = RobustnessConfig(cities="21", conditions="nominal,kidnap,traffic",
                             sources="oracle,ekf,dead_reckoning", agents="scripted", episodes=2,
-                            image_size=32, n_train=500, n_drive=400, max_steps=25, kidnap_at=5,
-                            out_dir=str(tmp_path))
+                            image_size=32, n_train=500, n_train_randomised=500, n_drive=400,
+                            max_steps=25, kidnap_at=5, out_dir=str(tmp_path))
     serial = run_robustness_bench(args)
     episodes = tmp_path / "robustness" / "episodes"
     assert len(list(episodes.glob("*.json"))) == 18  # every task's records, for a resume
