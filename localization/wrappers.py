@@ -65,7 +65,7 @@ FILTER_OPTIONS = {
                   "lost_ratio", "doubt_ratio", "confident_weight", "confirm_share",
                   "confirm_steps", "unconfirm_steps", "mode_radius", "heading_scale", "max_modes",
                   "min_mode_weight", "track_mode", "seed", "contact_motion", "free_space",
-                  "contact_spread", "contact_spread_distance"),
+                  "contact_spread", "contact_spread_distance", "unmapped"),
 }
 
 

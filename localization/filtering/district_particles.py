@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from localization.filtering.image_proposals import ImageProposals
-from localization.filtering.particle_likelihood import ParticleLikelihood
+from localization.filtering.particle_likelihood import ParticleLikelihood, capped_log_likelihood
 from localization.geometry import Array, wrap_angle
 
 __all__ = ["DistrictLikelihood", "DistrictProposals", "check_measurement_noise", "image_models",
@@ -97,7 +97,7 @@ class DistrictLikelihood:
 
     def log_likelihood(self, w: Array, X: Any) -> Array:
         """``log L_i = -0.5 min(d2_i, gate)`` (N,): never NaN."""
-        return -0.5 * np.minimum(np.nan_to_num(self.distances(w, X), nan=np.inf), self.gate)
+        return capped_log_likelihood(self.distances(w, X), self.gate)
 
 
 class DistrictProposals:

@@ -69,6 +69,7 @@ __all__ = [
     "contact_log_likelihood",
     "contact_points",
     "contact_projection",
+    "free_at",
     "touched_points",
     "weigh_contact",
 ]
@@ -206,10 +207,10 @@ def contact_contradicts(free_space: FreeSpace, x: Array, P: Array,
     the rule without one."""
     if bearing is None or not np.isfinite(bearing) or 4.0 * P[2, 2] >= np.pi ** 2:
         sigma = position_std(P)
-        return bool(np.all(_free(free_space, np.asarray(x[None, :2], dtype=np.float64),
+        return bool(np.all(free_at(free_space, np.asarray(x[None, :2], dtype=np.float64),
                                  CONTACT_CLEARANCE + 2.0 * sigma)))
     points, spacing = contact_points(x, P, float(bearing))
-    return bool(np.all(_free(free_space, points, CONTACT_SLACK + spacing)))
+    return bool(np.all(free_at(free_space, points, CONTACT_SLACK + spacing)))
 
 
 def contact_projection(free_space: FreeSpace, x: Array, P: Array, bearing: float,
@@ -237,8 +238,8 @@ def contact_projection(free_space: FreeSpace, x: Array, P: Array, bearing: float
     d = np.stack(np.meshgrid(t, t), -1).reshape(-1, 2)
     d = d[np.einsum("ij,ij->i", d, d) <= reach * reach]
     X = np.column_stack([x[0] + d[:, 0], x[1] + d[:, 1], np.full(len(d), x[2])])
-    ok = (~_free(free_space, touched_points(X, bearing), CONTACT_SLACK)
-          & _free(free_space, X[:, :2], ROBOT_RADIUS - CONTACT_SLACK))
+    ok = (~free_at(free_space, touched_points(X, bearing), CONTACT_SLACK)
+          & free_at(free_space, X[:, :2], ROBOT_RADIUS - CONTACT_SLACK))
     if not ok.any():
         return None
     d = d[ok]
@@ -271,8 +272,8 @@ def _explained(free_space: FreeSpace, X: Array, bearing: float | None) -> Array:
     (:func:`contact_log_likelihood`)."""
     X = np.asarray(X, dtype=np.float64)
     if bearing is None or not np.isfinite(bearing):
-        return ~_free(free_space, X[:, :2], CONTACT_CLEARANCE)
-    return ~_free(free_space, touched_points(X, bearing), CONTACT_SLACK)
+        return ~free_at(free_space, X[:, :2], CONTACT_CLEARANCE)
+    return ~free_at(free_space, touched_points(X, bearing), CONTACT_SLACK)
 
 
 def touched_points(X: Array, bearing: float) -> Array:
@@ -315,7 +316,7 @@ def check_bearing(bearing: object, name: str = "bearing") -> float | None:
     return float(bearing) if np.isfinite(bearing) else None
 
 
-def _free(free_space: FreeSpace, points: Array, margin: float) -> Array:
+def free_at(free_space: FreeSpace, points: Array, margin: float) -> Array:
     """``free_space(points, margin)``, checked to return one bool per point."""
     free = np.asarray(free_space(points, margin), dtype=bool)
     if free.shape != (len(points),):

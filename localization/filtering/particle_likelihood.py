@@ -29,9 +29,18 @@ from scipy.stats import chi2
 from localization.filtering.measurement_noise import inflate
 from localization.geometry import Array, to_body
 
-__all__ = ["MEASUREMENTS", "ParticleLikelihood"]
+__all__ = ["MEASUREMENTS", "UNMAPPED", "ParticleLikelihood", "capped_log_likelihood"]
 
 MEASUREMENTS = ("pose", "features", "representation")
+#: what a particle where the maps are undefined gets (``ParticleFilter(unmapped=...)``)
+UNMAPPED = ("floor", "typical")
+
+
+def capped_log_likelihood(d2: Array, gate: float, unmapped: Array | None = None) -> Array:
+    """``log L_i = -0.5 min(d2_i, gate)`` (N,), never NaN: where ``d2`` is NaN (no map at
+    that pose) ``-0.5 gate``, or ``-0.5 unmapped_i`` where ``unmapped`` (N,) is given."""
+    floor = np.full_like(d2, gate) if unmapped is None else np.minimum(unmapped, gate)
+    return -0.5 * np.where(np.isnan(d2), floor, np.minimum(d2, gate))
 
 
 class ParticleLikelihood:
@@ -93,4 +102,4 @@ class ParticleLikelihood:
 
     def log_likelihood(self, z: Array, X: ArrayLike) -> Array:
         """``log L_i = -0.5 min(d2_i, gate)`` (N,): never NaN."""
-        return -0.5 * np.minimum(np.nan_to_num(self.distances(z, X), nan=np.inf), self.gate)
+        return capped_log_likelihood(self.distances(z, X), self.gate)

@@ -57,11 +57,16 @@ from localization.filtering.map_contact import (
     check_bearing,
     check_free_space,
     contact_kinds,
+    free_at,
 )
 from localization.filtering.measurement_noise import inflate
 from localization.filtering.mode_confirmation import ModeConfirmation
 from localization.filtering.mode_tracker import make_tracker
-from localization.filtering.particle_likelihood import MEASUREMENTS
+from localization.filtering.particle_likelihood import (
+    MEASUREMENTS,
+    UNMAPPED,
+    capped_log_likelihood,
+)
 from localization.filtering.particle_motion import is_unicycle, move_particles
 from localization.filtering.particle_start import SampleFree, free_particles, gaussian_particles
 from localization.filtering.recorded_run import run_recorded
@@ -150,6 +155,11 @@ class ParticleBelief(ParticleContactMixin, ParticleStatusMixin, ParticleStateMix
         On such a contradicting contact, this share of the particles is moved up to this
         many metres to where the map explains it
         (:class:`~localization.filtering.contact_spread.ContactSpread`; 0: none).
+    unmapped : {"floor", "typical"}
+        What a particle gets where the maps are undefined (off the training poses): the
+        gate's floor, as an outlier; or, where ``free_space`` (needed) says the pose is on
+        the street, ``d2 = dof`` (the chi-square mean: the map says nothing there), so a
+        robot off a lane map's tube is not out-scored by a look-alike on it (method §13.2).
     """
 
     def __init__(self, localizer: Any, motion_model: Any, measurement: str = "representation",
@@ -170,7 +180,7 @@ class ParticleBelief(ParticleContactMixin, ParticleStatusMixin, ParticleStateMix
                  track_mode: bool | dict[str, Any] = True,
                  seed: int | None = None, contact_motion: str = "blocked",
                  free_space: FreeSpace | None = None, contact_spread: float = 0.5,
-                 contact_spread_distance: float = 2.0) -> None:
+                 contact_spread_distance: float = 2.0, unmapped: str = "floor") -> None:
         if measurement not in MEASUREMENTS:
             raise ValueError(f"unknown measurement {measurement!r}; choose one of {MEASUREMENTS}")
         if isinstance(n_particles, bool) or int(n_particles) != n_particles or n_particles < 1:
@@ -225,6 +235,9 @@ class ParticleBelief(ParticleContactMixin, ParticleStatusMixin, ParticleStateMix
         self.contact_motion = check_choice(contact_motion, "contact_motion", CONTACT_MOTIONS)
         self.free_space, self._bumped = check_free_space(free_space), 0
         self.spread = ContactSpread(contact_spread, contact_spread_distance)
+        self.unmapped = check_choice(unmapped, "unmapped", UNMAPPED)
+        if self.unmapped == "typical" and self.free_space is None:
+            raise ValueError("unmapped='typical' needs free_space (the city's free_mask)")
         self.tracker = make_tracker(track_mode, localizer, motion_model, measurement,
                                     alpha=self.alpha, radius=self.mode_radius,
                                     heading_scale=self.heading_scale,
@@ -356,7 +369,7 @@ class ParticleBelief(ParticleContactMixin, ParticleStatusMixin, ParticleStateMix
             self.belief_status = self._coast_status()
             self._track(u, w, contact)
             return np.nan, self.status
-        log_L = self.likelihood.log_likelihood(z, self.particles) + log_B
+        log_L = self._log_likelihood(z) + log_B
         old = self.log_weights[~self._fresh] if (~self._fresh).any() else self.log_weights
         w_avg = float(np.exp(log_sum_exp(old + log_L[~self._fresh] if (~self._fresh).any()
                                          else old + log_L) - log_sum_exp(old)))
@@ -378,6 +391,14 @@ class ParticleBelief(ParticleContactMixin, ParticleStatusMixin, ParticleStateMix
         self._track(u, w, contact)
         self._misses, self.belief_status = 0, self.status
         return w_avg, self.status
+
+    def _log_likelihood(self, z: Array) -> Array:
+        """log L_i of the measurement ``z`` at every particle (``unmapped``: see above)."""
+        if self.unmapped == "floor":
+            return self.likelihood.log_likelihood(z, self.particles)
+        free = free_at(self.free_space, self.particles[:, :2], 0.0)
+        return capped_log_likelihood(self.likelihood.distances(z, self.particles), self.gate,
+                                     np.where(free, float(len(self.R)), np.inf))
 
     def _draw(self, share: float) -> int:
         """How many particles to inject at this share: Binomial(N, share)."""

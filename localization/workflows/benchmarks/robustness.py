@@ -202,6 +202,8 @@ def belief_options(args: RobustnessConfig, source: str, condition: str = "nomina
                or args.randomised_map != "experiences")
     if source == "ekf" and args.detect_divergence and one_map:
         options["filter_options"] = {"detect_divergence": True}
+    if source == "particles" and args.particle_unmapped != "floor":
+        options["filter_options"] = {"unmapped": args.particle_unmapped}
     return options
 
 
@@ -236,9 +238,11 @@ def run_robust_task(task: RobustTask) -> list[Episode]:
 def task_path(task: RobustTask) -> Path:
     """Where a task's episode records go (``<out>/robustness/episodes/``)."""
     options = belief_options(task.config, task.source, task.condition)
+    extra = options.get("filter_options", {})
     name = (f"{task.agent}_{task.source}_{task.condition}_{task.city}_{task.seeds[0]}-"
             f"{task.seeds[-1]}_{task.config.image_size}px_{task.config.max_steps}"
-            f"{'_detect' if 'filter_options' in options else ''}"
+            f"{'_detect' if 'detect_divergence' in extra else ''}"
+            f"{'_unmapped-' + extra['unmapped'] if 'unmapped' in extra else ''}"
             f"{'_guard' if options.get('image_pose') and task.agent == 'scripted' else ''}"
             f"{_on_daylight(task)}.json")
     return Path(task.config.out_dir) / "robustness" / "episodes" / name

@@ -7,6 +7,7 @@ import dataclasses
 from dataclasses import dataclass, field
 
 from envs.conditions import PRESETS
+from localization.filtering.particle_likelihood import UNMAPPED
 from localization.workflows.benchmarks.robustness_report import HELD_OUT_CITIES, MOVING
 from localization.workflows.parallel import RAY_ADDRESS_HELP, WORKERS_HELP
 
@@ -102,6 +103,10 @@ class RobustnessConfig:
                 "row: pushed contact steps per episode 0.255 -> 0.125 on the EKF, 0.305 -> 0.150 "
                 "on the particles; nominal success 1.00 and no contact either way, time to goal "
                 "+0.3 / +0.9 %); off: the agent steers on the belief alone"})
+    particle_unmapped: str = field(default="floor", metadata={
+        "help": "what the particle rows' particles get where the maps are undefined "
+                "(ParticleFilter(unmapped=...)): floor (the gate's, as an outlier) or typical "
+                "(d2 = dof on the street: the map says nothing there)"})
     workers: int = field(default=1, metadata={"help": WORKERS_HELP})
     ray_address: str = field(default="", metadata={"help": RAY_ADDRESS_HELP})
     reuse_localizers: bool = field(default=False, metadata={
@@ -132,6 +137,9 @@ class RobustnessConfig:
         if self.moving_localizer not in TRAININGS:
             raise ValueError(f"robustness moving_localizer must be one of {TRAININGS}, got "
                              f"{self.moving_localizer!r}")
+        if self.particle_unmapped not in UNMAPPED:
+            raise ValueError(f"robustness particle_unmapped must be one of {UNMAPPED}, got "
+                             f"{self.particle_unmapped!r}")
         if self.daylight_lanes not in DAYLIGHT_LANES:
             raise ValueError(f"robustness daylight_lanes must be one of {DAYLIGHT_LANES}, got "
                              f"{self.daylight_lanes!r}")

@@ -178,6 +178,36 @@ def test_a_contact_weighs_the_particles_by_the_map_at_the_touched_side(localizer
     assert statuses[-1] != "lost" or pf.amcl.w_fast < pf.lost_ratio * pf.amcl.w_slow
 
 
+def test_capped_log_likelihood_floors_nan_at_the_gate_or_the_given_value():
+    from localization.filtering.particle_likelihood import capped_log_likelihood
+
+    d2 = np.array([1.0, 20.0, np.nan, np.nan])
+    np.testing.assert_array_equal(capped_log_likelihood(d2, 14.0), [-0.5, -7.0, -7.0, -7.0])
+    np.testing.assert_array_equal(
+        capped_log_likelihood(d2, 14.0, np.array([0.0, 0.0, 3.0, np.inf])),
+        [-0.5, -7.0, -1.5, -7.0])
+
+
+def test_unmapped_street_poses_score_as_typical_and_buildings_at_the_floor(localizer, features):
+    """Particles where the route map has no R*(theta): the gate's floor by default; with
+    unmapped="typical" a free one scores d2 = dof (3), one inside a building the floor, and
+    a particle on the map what it scored before."""
+    W, poses, _ = features
+    X = np.array([poses[0], [30.0, 0.0, 0.0], [40.0, 0.0, 0.0]])
+    floor, typical = (_belief(localizer, track_mode=False, free_space=_Wall(35.0),
+                              unmapped=u) for u in ("floor", "typical"))
+    z = floor.likelihood.measure(W[0])
+    d2 = floor.distances(W[0], X)
+    assert np.isfinite(d2[0]) and np.isnan(d2[1:]).all()
+    for pf in (floor, typical):
+        pf.reset(W[0], x0=poses[0])
+        pf._set(X)
+    np.testing.assert_allclose(floor._log_likelihood(z), [-0.5 * min(d2[0], floor.gate),
+                                                          -0.5 * floor.gate, -0.5 * floor.gate])
+    np.testing.assert_allclose(typical._log_likelihood(z), [-0.5 * min(d2[0], floor.gate),
+                                                            -1.5, -0.5 * floor.gate])
+
+
 def test_without_a_map_or_with_traffic_a_contact_weighs_nothing(localizer, features):
     """A map that has room everywhere ahead (every particle's touched point is free): a
     bump into the city weighs the particles and makes the belief "lost" (without the
@@ -388,6 +418,8 @@ def test_tracks_the_drive_it_was_fitted_with(localizer, features):
     ({"min_mode_weight": 1.0}, ValueError, "min_mode_weight"),
     ({"ambiguous_injection": 1.5}, ValueError, "ambiguous_injection"),
     ({"unconfirm_steps": 0}, ValueError, "unconfirm_steps"),
+    ({"unmapped": "zero"}, ValueError, "unmapped"),
+    ({"unmapped": "typical"}, ValueError, "free_space"),
 ])
 def test_bad_arguments_raise_clear_errors(localizer, kwargs, error, match):
     with pytest.raises(error, match=match):

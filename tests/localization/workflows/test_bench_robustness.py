@@ -206,3 +206,11 @@ def test_detect_divergence_applies_to_the_ekf_rows_and_keys_their_records() -> N
     names = {task_path(RobustTask(config, 21, "nominal", source, "scripted", (1, 2))).name
              for config in (plain, detect) for source in ("ekf", "particles")}
     assert len(names) == 3  # the particle rows' records are the same either way
+    typical = RobustnessConfig(guard=False, particle_unmapped="typical")
+    assert belief_options(typical, "particles") == {
+        "filter": "particles", "image_pose": False, "filter_options": {"unmapped": "typical"}}
+    assert belief_options(typical, "ekf") == belief_options(detect, "ekf")
+    path = task_path(RobustTask(typical, 21, "nominal", "particles", "scripted", (1, 2))).name
+    assert "_unmapped-typical" in path and path not in names
+    with pytest.raises(ValueError, match="particle_unmapped"):
+        RobustnessConfig(particle_unmapped="zero").lists()
