@@ -190,8 +190,8 @@ def test_detect_divergence_applies_to_the_ekf_rows_and_keys_their_records() -> N
         task_path,
     )
 
-    plain = RobustnessConfig(detect_divergence=False, guard=False, particle_unmapped="floor")
-    detect = RobustnessConfig(guard=False, particle_unmapped="floor")
+    plain = RobustnessConfig(detect_divergence=False, guard=False)
+    detect = RobustnessConfig(guard=False)
     assert belief_options(plain, "ekf") == {"filter": "ekf", "image_pose": False}
     # the scripted agent's guard reads psi* of each image: the belief publishes it then only
     assert belief_options(RobustnessConfig(), "particles")["image_pose"] is True
@@ -206,7 +206,7 @@ def test_detect_divergence_applies_to_the_ekf_rows_and_keys_their_records() -> N
     names = {task_path(RobustTask(config, 21, "nominal", source, "scripted", (1, 2))).name
              for config in (plain, detect) for source in ("ekf", "particles")}
     assert len(names) == 3  # the particle rows' records are the same either way
-    typical = RobustnessConfig(guard=False)  # the particle rows' default since stop 73
+    typical = RobustnessConfig(guard=False, particle_unmapped="typical")
     assert belief_options(typical, "particles") == {
         "filter": "particles", "image_pose": False, "filter_options": {"unmapped": "typical"}}
     assert belief_options(typical, "ekf") == belief_options(detect, "ekf")
