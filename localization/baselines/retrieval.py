@@ -19,7 +19,7 @@ from localization.geometry import Array
 __all__ = ["RetrievalRegressor", "cv_neighbor_errors"]
 
 
-def neighbor_mean(dist: Array, Y: Array, weights: str) -> Array:
+def _neighbor_mean(dist: Array, Y: Array, weights: str) -> Array:
     """The prediction of ``KNeighborsRegressor`` from its neighbours: the mean of the rows of
     ``Y`` (q, k, p), weighted by ``1 / dist`` (q, k) for ``weights="distance"`` (a row with
     a zero distance keeps only its zero-distance neighbours, as scikit-learn does)."""
@@ -56,8 +56,9 @@ def cv_neighbor_errors(X: Array, Y: Array, ks: Sequence[int], weights: str,
     for train, test in folds.split(X):
         index = NearestNeighbors(n_neighbors=max(ks), algorithm=algorithm).fit(X[train])
         dist, ind = index.kneighbors(X[test])
+        Y_nb = Y[train][ind]  # (q, max(ks), p), gathered once for every k
         for j, k in enumerate(ks):
-            pred = neighbor_mean(dist[:, :k], Y[train][ind[:, :k]], weights)
+            pred = _neighbor_mean(dist[:, :k], Y_nb[:, :k], weights)
             errors[j] += np.mean((pred - Y[test]) ** 2)
     return errors / folds.get_n_splits()
 

@@ -26,10 +26,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.stats import chi2
 
+from localization._validation import check_choice
+from localization.filtering.map_contact import FreeSpace, free_at
 from localization.filtering.measurement_noise import inflate
 from localization.geometry import Array, to_body
 
-__all__ = ["MEASUREMENTS", "UNMAPPED", "ParticleLikelihood", "capped_log_likelihood"]
+__all__ = ["MEASUREMENTS", "UNMAPPED", "ParticleLikelihood", "capped_log_likelihood",
+           "check_unmapped", "unmapped_d2"]
 
 MEASUREMENTS = ("pose", "features", "representation")
 #: what a particle where the maps are undefined gets (``ParticleFilter(unmapped=...)``)
@@ -41,6 +44,22 @@ def capped_log_likelihood(d2: Array, gate: float, unmapped: Array | None = None)
     that pose) ``-0.5 gate``, or ``-0.5 unmapped_i`` where ``unmapped`` (N,) is given."""
     floor = np.full_like(d2, gate) if unmapped is None else np.minimum(unmapped, gate)
     return -0.5 * np.where(np.isnan(d2), floor, np.minimum(d2, gate))
+
+
+def unmapped_d2(free_space: FreeSpace, X: Array, dof: int) -> Array:
+    """``unmapped="typical"``'s d2 (N,) for poses ``X`` (N, 3) where the maps are undefined:
+    ``dof`` (the chi-square mean: the map says nothing there) where ``free_space`` has the
+    street, inf (the gate's floor) inside a building."""
+    return np.where(free_at(free_space, X[:, :2], 0.0), float(dof), np.inf)
+
+
+def check_unmapped(unmapped: object, free_space: FreeSpace | None) -> str:
+    """``unmapped`` if one of :data:`UNMAPPED` ("typical" needs ``free_space``), else a
+    ValueError naming it."""
+    choice = check_choice(unmapped, "unmapped", UNMAPPED)
+    if choice == "typical" and free_space is None:
+        raise ValueError("unmapped='typical' needs free_space (the city's free_mask)")
+    return choice
 
 
 class ParticleLikelihood:

@@ -39,7 +39,7 @@ from filterpy.monte_carlo import systematic_resample
 from numpy.typing import ArrayLike
 from sklearn.exceptions import NotFittedError
 
-from localization._validation import check_choice, check_int, check_real
+from localization._validation import check_array, check_choice, check_int, check_real
 from localization.filtering._modes import Mode, find_modes
 from localization.filtering._particle_contact import ParticleContactMixin
 from localization.filtering._particle_state import ParticleStateMixin
@@ -57,15 +57,15 @@ from localization.filtering.map_contact import (
     check_bearing,
     check_free_space,
     contact_kinds,
-    free_at,
 )
 from localization.filtering.measurement_noise import inflate
 from localization.filtering.mode_confirmation import ModeConfirmation
 from localization.filtering.mode_tracker import make_tracker
 from localization.filtering.particle_likelihood import (
     MEASUREMENTS,
-    UNMAPPED,
     capped_log_likelihood,
+    check_unmapped,
+    unmapped_d2,
 )
 from localization.filtering.particle_motion import is_unicycle, move_particles
 from localization.filtering.particle_start import SampleFree, free_particles, gaussian_particles
@@ -235,9 +235,7 @@ class ParticleBelief(ParticleContactMixin, ParticleStatusMixin, ParticleStateMix
         self.contact_motion = check_choice(contact_motion, "contact_motion", CONTACT_MOTIONS)
         self.free_space, self._bumped = check_free_space(free_space), 0
         self.spread = ContactSpread(contact_spread, contact_spread_distance)
-        self.unmapped = check_choice(unmapped, "unmapped", UNMAPPED)
-        if self.unmapped == "typical" and self.free_space is None:
-            raise ValueError("unmapped='typical' needs free_space (the city's free_mask)")
+        self.unmapped = check_unmapped(unmapped, self.free_space)
         self.tracker = make_tracker(track_mode, localizer, motion_model, measurement,
                                     alpha=self.alpha, radius=self.mode_radius,
                                     heading_scale=self.heading_scale,
@@ -254,12 +252,7 @@ class ParticleBelief(ParticleContactMixin, ParticleStatusMixin, ParticleStateMix
         self._fresh = np.zeros(0, dtype=bool)  # particles injected at the last step
 
     def _check_w(self, w: ArrayLike) -> Array:
-        w = np.asarray(w, dtype=np.float64)
-        if w.shape != (self._m,):
-            raise ValueError(f"w must be a feature vector of shape ({self._m},), got {w.shape}")
-        if not np.all(np.isfinite(w)):
-            raise ValueError("w (features) contains NaN or inf")
-        return w
+        return check_array(w, "w (features)", shape=(self._m,))
 
     def _set(self, X: Array, log_w: Array | None = None) -> None:
         self.particles = np.column_stack([X[:, :2], wrap_angle(X[:, 2])])
@@ -322,9 +315,7 @@ class ParticleBelief(ParticleContactMixin, ParticleStatusMixin, ParticleStateMix
         ``contact`` step (what was touched: ``info["collision_with"]``, or True) as
         ``contact_motion`` says."""
         self._check()
-        u = np.asarray(u, dtype=np.float64)
-        if u.shape != (2,) or not np.all(np.isfinite(u)):
-            raise ValueError(f"u (control) must be a finite (2,) [v, w], got {u!r}")
+        u = check_array(u, "u (control)", shape=(2,), what="[v, w]")
         u_k, Q_contact, kinds = self.gain * u, None, contact_kinds(contact)
         if kinds and self.contact_motion == "blocked":
             u_k, Q_contact = blocked_motion(self.motion_model, self.particles[0], u_k,
@@ -394,11 +385,9 @@ class ParticleBelief(ParticleContactMixin, ParticleStatusMixin, ParticleStateMix
 
     def _log_likelihood(self, z: Array) -> Array:
         """log L_i of the measurement ``z`` at every particle (``unmapped``: see above)."""
-        if self.unmapped == "floor":
-            return self.likelihood.log_likelihood(z, self.particles)
-        free = free_at(self.free_space, self.particles[:, :2], 0.0)
-        return capped_log_likelihood(self.likelihood.distances(z, self.particles), self.gate,
-                                     np.where(free, float(len(self.R)), np.inf))
+        X = self.particles
+        return capped_log_likelihood(self.likelihood.distances(z, X), self.gate, None if (
+            self.unmapped == "floor") else unmapped_d2(self.free_space, X, len(self.R)))
 
     def _draw(self, share: float) -> int:
         """How many particles to inject at this share: Binomial(N, share)."""
