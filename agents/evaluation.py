@@ -3,7 +3,10 @@
 Every summary reports, each with its standard error: success, SPL (success weighted by path
 length, Anderson et al. 2018, "On Evaluation of Embodied Navigation Agents", with the
 shortest street path as the reference), collisions per episode, time to goal and the belief's
-RMSE.
+RMSE; and, for a belief that names its status, how often it misled: steps on which it said
+"tracking" while more than :data:`MISLEADING_ERROR` m off (GNSS integrity monitoring's
+"hazardously misleading information": a wrong pose given as good, which a pilot that reads the
+status cannot guard against).
 
 Works with any agent that has ``reset()`` and ``act(obs)`` (or ``act(obs, info)``: it then
 gets the step's info, e.g. ``belief_status``) on belief observations and any env
@@ -24,8 +27,12 @@ from tqdm import tqdm
 
 from agents.planner import StreetPlanner, path_length
 
-__all__ = ["METRIC_COLUMNS", "Episode", "as_records", "mean_and_se", "metric_cells", "run_episode", "run_episodes", "spl",
-           "summarize"]
+__all__ = ["METRIC_COLUMNS", "MISLEADING_ERROR", "Episode", "as_records", "mean_and_se",
+           "metric_cells", "run_episode", "run_episodes", "spl", "summarize"]
+
+#: m: a step on which the belief says "tracking" while its mean is farther than this from the
+#: true position misleads (a street of the 20 m city is 3 m wide: 1 m off puts a plan at a wall)
+MISLEADING_ERROR = 1.0
 
 
 @dataclass(frozen=True)
@@ -50,6 +57,10 @@ class Episode:
         (``"traffic"`` in ``info["collision_with"]``): hazards an agent may not be able to avoid.
     tipped_over : bool — the robot was on its side or back at some step
         (``info["tipped_over"]``: a moving object flipped it; it then drives blind).
+    misled_steps : int or None — steps on which ``info["belief_status"]`` was "tracking" while
+        the belief mean was more than :data:`MISLEADING_ERROR` m from the true position; None
+        for a pose source that names no status (the true pose, dead reckoning) and for
+        records written before it was measured.
     """
 
     seed: int
@@ -63,6 +74,7 @@ class Episode:
     belief_rmse: float
     traffic_collision_steps: int = 0
     tipped_over: bool = False
+    misled_steps: int | None = None
 
     @property
     def path_ratio(self) -> float:
@@ -131,6 +143,7 @@ def run_episode(env: gym.Env, agent: Any, seed: int, planner: StreetPlanner | No
     start = info["pose"].copy()
     shortest = max(path_length(planner.plan(start[:2], base.goal)) - base.GOAL_RADIUS, 0.0)
     travelled, collisions, traffic, sq_err, steps, tipped = 0.0, 0, 0, [], 0, False
+    misled: int | None = None
     terminated = truncated = False
     prev = start[:2]
     while not (terminated or truncated) and (max_steps is None or steps < max_steps):
@@ -145,12 +158,19 @@ def run_episode(env: gym.Env, agent: Any, seed: int, planner: StreetPlanner | No
         tipped = tipped or bool(info.get("tipped_over", False))
         sq_err.append(float(np.sum((np.asarray(obs["pose_mean"][:2], float) - pose[:2]) ** 2))
                       if "pose_mean" in obs else np.nan)
+        if "belief_status" in info:
+            misled = (misled or 0) + _misleads(info["belief_status"], sq_err[-1])
         steps += 1
     return Episode(seed=int(seed), success=bool(terminated), steps=steps, time=steps * base.dt,
                    path_length=travelled, shortest=shortest, collision_steps=collisions,
                    final_distance=float(info["distance_to_goal"]),
                    belief_rmse=float(np.sqrt(np.mean(sq_err))) if sq_err else np.nan,
-                   traffic_collision_steps=traffic, tipped_over=tipped)
+                   traffic_collision_steps=traffic, tipped_over=tipped, misled_steps=misled)
+
+
+def _misleads(status: str, squared_error: float) -> bool:
+    """The belief says "tracking" while more than :data:`MISLEADING_ERROR` m off."""
+    return status == "tracking" and squared_error > MISLEADING_ERROR ** 2
 
 
 def run_episodes(env: gym.Env, agent: Any, seeds: Iterable[int], progress: bool = True,
@@ -177,7 +197,9 @@ def summarize(episodes: Sequence[Episode]) -> dict[str, float]:
     (share of episodes with any contact); ``tipped_over_episodes`` (share of episodes in
     which the robot was flipped over); ``time_to_goal`` (simulated s) and ``path_ratio``
     (travelled / shortest), over successes; ``belief_rmse`` (m, over every step of every
-    episode, its standard error by the delta method from the episodes' mean squared errors).
+    episode, its standard error by the delta method from the episodes' mean squared errors);
+    ``misled_steps_per_episode`` and ``misled_episodes`` (share of episodes with any), over the
+    episodes that measured it (NaN when none did).
     """
     if not episodes:
         raise ValueError("no episodes to summarize")
@@ -193,10 +215,17 @@ def summarize(episodes: Sequence[Episode]) -> dict[str, float]:
                          ("collision_episodes", [e.collision_steps > 0 for e in episodes]),
                          ("tipped_over_episodes", [e.tipped_over for e in episodes]),
                          ("time_to_goal", [e.time for e in ok]),
-                         ("path_ratio", [e.path_ratio for e in ok])):
+                         ("path_ratio", [e.path_ratio for e in ok]),
+                         ("misled_steps_per_episode", _misled(episodes)),
+                         ("misled_episodes", [m > 0 for m in _misled(episodes)])):
         out[name], out[f"{name}_se"] = mean_and_se(values)
     out["belief_rmse"], out["belief_rmse_se"] = _rmse_and_se([e.belief_rmse for e in episodes])
     return out
+
+
+def _misled(episodes: Sequence[Episode]) -> list[int]:
+    """The misled steps of the episodes that measured them."""
+    return [e.misled_steps for e in episodes if e.misled_steps is not None]
 
 
 def _rmse_and_se(episode_rmse: Sequence[float]) -> tuple[float, float]:
@@ -216,11 +245,16 @@ def as_records(episodes: Sequence[Episode]) -> list[dict[str, Any]]:
 #: the table columns of :func:`metric_cells`: (summary key, header, decimals)
 METRIC_COLUMNS = (("success_rate", "success", 2), ("spl", "SPL", 2),
                   ("collisions_per_episode", "collisions / episode", 2),
-                  ("time_to_goal", "time to goal (s)", 1), ("belief_rmse", "belief RMSE (m)", 2))
+                  ("time_to_goal", "time to goal (s)", 1), ("belief_rmse", "belief RMSE (m)", 2),
+                  ("misled_steps_per_episode", "misled steps / episode", 2))
 
 
 def metric_cells(summary: dict[str, float]) -> list[str]:
     """Markdown cells "value ± se" of a :func:`summarize` result, in :data:`METRIC_COLUMNS`
-    order ("n/a" where undefined: no time to goal without a success)."""
-    return ["n/a" if np.isnan(summary[key]) else f"{summary[key]:.{d}f} ± {summary[key + '_se']:.{d}f}"
-            for key, _, d in METRIC_COLUMNS]
+    order ("n/a" where undefined: no time to goal without a success, no misled steps for a
+    source without a status or a summary written before they were measured)."""
+    cells = []
+    for key, _, d in METRIC_COLUMNS:
+        value = summary.get(key, float("nan"))
+        cells.append("n/a" if np.isnan(value) else f"{value:.{d}f} ± {summary[key + '_se']:.{d}f}")
+    return cells

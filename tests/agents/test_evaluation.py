@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
+
+import gymnasium as gym
 import numpy as np
 import pytest
 
-from agents.evaluation import Episode, mean_and_se, metric_cells, spl, summarize
+import envs  # noqa: F401  (registers AppearanceNav-v0)
+from agents.evaluation import Episode, mean_and_se, metric_cells, run_episode, spl, summarize
 
 
 def _episode(success: bool, shortest: float, travelled: float, collisions: int = 0,
@@ -65,3 +69,59 @@ def test_summarize_reports_metrics_with_standard_errors() -> None:
 def test_summarize_rejects_no_episodes() -> None:
     with pytest.raises(ValueError, match="no episodes"):
         summarize([])
+
+
+class _StatusBelief(gym.Wrapper):
+    """A stand-in belief: its mean is the true position shifted by ``offsets[t]`` m along x,
+    its status ``statuses[t]`` at step t."""
+
+    def __init__(self, env: gym.Env, offsets: list[float], statuses: list[str]) -> None:
+        super().__init__(env)
+        self.offsets, self.statuses, self.t = offsets, statuses, 0
+
+    def reset(self, **kwargs):
+        _, info = self.env.reset(**kwargs)
+        self.t = 0
+        return {"pose_mean": info["pose"].copy()}, info
+
+    def step(self, action):
+        _, reward, terminated, truncated, info = self.env.step(action)
+        mean = info["pose"] + np.array([self.offsets[self.t], 0.0, 0.0])
+        info = {**info, "belief_status": self.statuses[self.t]}
+        self.t += 1
+        return {"pose_mean": mean}, reward, terminated, truncated, info
+
+
+class _Still:
+    def reset(self) -> None:
+        pass
+
+    def act(self, obs):
+        return np.zeros(2, dtype=np.float32)
+
+
+def test_misled_steps_count_tracking_claims_more_than_a_metre_off() -> None:
+    # misleading: step 1 (tracking, 1.5 m) and 4 (tracking, 3 m); not: 0.5 m off while
+    # tracking, 2 m off while lost or doubtful, exactly 1 m
+    offsets = [0.5, 1.5, 2.0, 2.0, 3.0, 1.0]
+    statuses = ["tracking", "tracking", "lost", "doubtful", "tracking", "tracking"]
+    env = _StatusBelief(gym.make("AppearanceNav-v0", image_size=(16, 16)), offsets, statuses)
+    episode = run_episode(env, _Still(), seed=0, max_steps=6)
+    env.close()
+    assert episode.misled_steps == 2
+    plain = gym.make("AppearanceNav-v0", image_size=(16, 16))
+    no_status = run_episode(_StatusBelief(plain, offsets, statuses).env, _Still(), seed=0,
+                            max_steps=2)
+    plain.close()
+    assert no_status.misled_steps is None  # the env alone names no status
+
+
+def test_summarize_misled_steps_over_the_episodes_that_measured_them() -> None:
+    runs = [dataclasses.replace(_episode(True, 1.0, 1.0), misled_steps=m) for m in (0, 4, None)]
+    s = summarize(runs)
+    assert s["misled_steps_per_episode"] == 2.0 and s["misled_episodes"] == 0.5
+    assert metric_cells(s)[-1] == "2.00 ± 2.00"
+    none = summarize([_episode(True, 1.0, 1.0)])
+    assert np.isnan(none["misled_steps_per_episode"]) and metric_cells(none)[-1] == "n/a"
+    old = {k: v for k, v in s.items() if not k.startswith("misled")}  # a summary from before
+    assert metric_cells(old)[-1] == "n/a"
