@@ -201,7 +201,8 @@ def belief_options(args: RobustnessConfig, source: str, condition: str = "nomina
     one_map = (training_of(condition, args.moving_localizer) == "daylight"
                or args.randomised_map != "experiences")
     if source == "ekf" and args.detect_divergence and one_map:
-        options["filter_options"] = {"detect_divergence": True}
+        detect = {"offset_doubt": args.offset_doubt} if args.offset_doubt > 0 else True
+        options["filter_options"] = {"detect_divergence": detect}
     if source == "particles" and args.particle_unmapped != "floor":
         options["filter_options"] = {"unmapped": args.particle_unmapped}
     return options
@@ -241,11 +242,19 @@ def task_path(task: RobustTask) -> Path:
     extra = options.get("filter_options", {})
     name = (f"{task.agent}_{task.source}_{task.condition}_{task.city}_{task.seeds[0]}-"
             f"{task.seeds[-1]}_{task.config.image_size}px_{task.config.max_steps}"
-            f"{'_detect' if 'detect_divergence' in extra else ''}"
+            f"{_detect_mark(extra)}"
             f"{'_unmapped-' + extra['unmapped'] if 'unmapped' in extra else ''}"
             f"{'_guard' if options.get('image_pose') and task.agent == 'scripted' else ''}"
             f"{_on_daylight(task)}.json")
     return Path(task.config.out_dir) / "robustness" / "episodes" / name
+
+
+def _detect_mark(filter_options: dict[str, Any]) -> str:
+    """A file-name mark of the EKF's divergence monitor and its offset test."""
+    detect = filter_options.get("detect_divergence")
+    if detect is None:
+        return ""
+    return "_detect" + (f"-offset{detect['offset_doubt']:g}" if isinstance(detect, dict) else "")
 
 
 def _on_daylight(task: RobustTask) -> str:

@@ -96,6 +96,10 @@ class RobustnessConfig:
                 "steps kidnapped and pushed, nominal success 1.00 both; docs/benchmarks.md "
                 "section 11); rows on the randomised localizer of experiences (several "
                 "maps, which the monitor refuses) keep the plain EKF"})
+    offset_doubt: float = field(default=0.0, metadata={
+        "help": "the EKF rows' divergence monitor also calls the belief doubtful while the "
+                "images agree on a place this many metres (beyond 3 sigma) off it "
+                "(DivergenceMonitor(offset_doubt=...), status only; 0: off)"})
     guard: bool = field(default=True, metadata={
         "help": "the scripted agent's image guard (ScriptedAgent(guard=True), agents.guard): "
                 "no forward step that the latest image's own pose estimate says runs into a "
@@ -143,6 +147,9 @@ class RobustnessConfig:
         if self.particle_unmapped not in UNMAPPED:
             raise ValueError(f"robustness particle_unmapped must be one of {UNMAPPED}, got "
                              f"{self.particle_unmapped!r}")
+        if not self.offset_doubt >= 0:  # NaN too
+            raise ValueError(f"robustness offset_doubt must be >= 0 (0: off), got "
+                             f"{self.offset_doubt!r}")
         if self.daylight_lanes not in DAYLIGHT_LANES:
             raise ValueError(f"robustness daylight_lanes must be one of {DAYLIGHT_LANES}, got "
                              f"{self.daylight_lanes!r}")

@@ -465,3 +465,32 @@ def test_a_belief_shoved_beside_the_truth_is_widened_back(localizer, drive, shif
             f.step(controls[t - 1], W[t])
         errors[name] = float(np.hypot(*(f.x[:2] - poses[START + 9][:2])))
     assert errors["drift"] < 0.3 and errors["no drift"] > 0.6, errors
+
+
+def test_offset_doubt_holds_while_the_images_agree_elsewhere():
+    """psi* agreeing 1.2 m beside the belief: doubtful from the 4th such step on and for as
+    long as it lasts (not once per fresh run as the drift test), never a drift (nothing to
+    widen) nor lost; once psi* agrees with the belief again, the doubt goes after one step."""
+    m = DivergenceMonitor(offset_doubt=0.5, drift_steps=4)
+    feed(m, 8, 1.5, NEAR, False)
+    verdicts = feed(m, 8, 4.0, SIDEWAYS, False)
+    assert [v.doubtful for v in verdicts] == [False] * 3 + [True] * 5
+    assert all(v.drift is None and not v.lost and v.restart is None for v in verdicts)
+    assert not feed(m, 1, 1.5, NEAR, False)[0].doubtful
+
+
+@pytest.mark.parametrize("psis, u", [
+    ([SIDEWAYS, -SIDEWAYS], (0.5, 0.0)),  # scattered on both sides: no place agreed on
+    ([np.array([0.0, 0.6, 0.0])], (0.5, 0.0)),  # 0.6 m off: within 0.5 m + 3 sigma (0.3 m)
+    ([SIDEWAYS], (0.0, 0.0)),  # one view at rest: one error, however often
+])
+def test_no_offset_doubt_without_agreement_far_enough_from_new_views(psis, u):
+    m = DivergenceMonitor(offset_doubt=0.5, drift_steps=4)
+    verdicts = [feed(m, 1, 4.0, psis[t % len(psis)], False, u=u)[0] for t in range(12)]
+    assert not any(v.doubtful for v in verdicts)
+
+
+def test_offset_doubt_is_checked():
+    with pytest.raises(ValueError, match="offset_doubt"):
+        DivergenceMonitor(offset_doubt=-0.5)
+    assert DivergenceMonitor().offset_doubt is None  # off by default
