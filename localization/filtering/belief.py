@@ -235,6 +235,12 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin, BeliefContact
         self._check()
         return self.ekf.P.copy()  # type: ignore[union-attr]
 
+    @property
+    def images_doubt(self) -> bool:
+        """The divergence monitor called the last step's images doubtful (its NIS, drift or
+        offset tests; False without a monitor)."""
+        return self._doubtful_now
+
     def _check(self) -> None:
         if self.ekf is None:
             raise RuntimeError("the belief is not initialised: call reset() first")

@@ -194,9 +194,10 @@ class DivergenceMonitor:
         the recent ones' (needs ``2 * drift_steps <= window``). Default
         :data:`DRIFT_CHANGE`; None: no change condition.
     drift_only : bool
-        Run the drift test alone: never "lost", no restart, "doubtful" only on a drift (the
-        particle belief's :class:`~localization.filtering.mode_tracker.ModeTracker`, whose
-        EKF the particles restart); needs a ``drift_distance``.
+        Run the drift and offset tests alone: never "lost", no restart, "doubtful" only on a
+        drift or an offset (the particle belief's
+        :class:`~localization.filtering.mode_tracker.ModeTracker`, whose EKF the particles
+        restart); needs a ``drift_distance`` or an ``offset_doubt``.
     sustained_steps : int
         Rejected, disagreeing measurements in a row that restart the belief whatever their
         NIS (>= 1).
@@ -251,9 +252,9 @@ class DivergenceMonitor:
         if self.drift_change is not None and 2 * self.drift_steps > self.window:
             raise ValueError(f"drift_change needs 2 * drift_steps ({drift_steps}) <= window "
                              f"({window}): it compares two runs of drift_steps psi* values")
-        if self.drift_only and self.drift_distance is None:
-            raise ValueError("drift_only=True needs a drift_distance (e.g. DRIFT_DISTANCE): "
-                             "without it the monitor would test nothing")
+        if self.drift_only and self.drift_distance is None and self.offset_doubt is None:
+            raise ValueError("drift_only=True needs a drift_distance (e.g. DRIFT_DISTANCE) or "
+                             "an offset_doubt: without them the monitor would test nothing")
         if self.drift_steps > self.window:
             raise ValueError(f"drift_steps ({drift_steps}) must not exceed window ({window}): "
                              "the monitor keeps psi* for window steps")
@@ -307,7 +308,7 @@ class DivergenceMonitor:
         self._moved = False
         if self.drift_only:
             drift = self._drift(x, P)
-            return Verdict(False, doubtful=drift is not None, drift=drift)
+            return Verdict(False, doubtful=drift is not None or self._offset(x, P), drift=drift)
         strong = (len(self._strong) == self.strong_steps
                   and float(np.median(self._strong)) > self.strong_nis)
         disagree = (len(self._disagree) >= self.window // 2

@@ -96,6 +96,11 @@ class ModeTracker:
         default, as the EKF's (``localization.filtering.divergence``: it pulled right
         beliefs onto biased psi* on the global benchmark, held out at stop 54 too).
         Not with a localizer of several districts (whose EKF takes no monitor).
+    offset_doubt : float or None
+        Give the EKF the divergence monitor's offset test (``DivergenceMonitor(offset_doubt=
+        ...)``, status only): :attr:`images_doubt` while the recent psi* put the robot this
+        many metres (beyond 3 sigma) off the EKF; None (the default): off. Not with a
+        localizer of several districts.
     free_space : callable, optional
         The map (``city.free_mask``), given to the EKF with its contact projection
         (:class:`~localization.filtering.belief.BeliefFilter`'s ``free_space`` and
@@ -123,7 +128,8 @@ class ModeTracker:
                  strong_steps: int = 8, max_gated: int = 30, max_unsupported: int = 20,
                  probation: int = 20,
                  alpha: ArrayLike | None = None, drift: bool = False,
-                 free_space: FreeSpace | None = None, contact_motion: str = "blocked") -> None:
+                 free_space: FreeSpace | None = None, contact_motion: str = "blocked",
+                 offset_doubt: float | None = None) -> None:
         for name, v in (("support_weight", support_weight),
                         ("confident_weight", confident_weight)):
             check_real(v, name, low=0.0, high=1.0, low_open=True)
@@ -137,11 +143,13 @@ class ModeTracker:
         self.strong_nis = float(strong_nis)
         if not isinstance(drift, (bool, np.bool_)):
             raise TypeError(f"drift must be a bool, got {drift!r}")
-        drift = bool(drift) and not callable(getattr(localizer, "local", None))
+        one_map = not callable(getattr(localizer, "local", None))
+        tests = {"drift_distance": DRIFT_DISTANCE if drift else None,
+                 "offset_doubt": offset_doubt}
+        monitor = one_map and any(v is not None for v in tests.values())
         self.ekf = BeliefFilter(localizer, motion_model, measurement, relocalize_after=None,
-                                alpha=alpha, detect_divergence={
-                                    "drift_only": True, "drift_distance": DRIFT_DISTANCE}
-                                if drift else False, free_space=free_space,
+                                alpha=alpha, detect_divergence={"drift_only": True, **tests}
+                                if monitor else False, free_space=free_space,
                                 contact_motion=contact_motion)
         self.support_weight, self.confident_weight = float(support_weight), float(confident_weight)
         self.radius, self.heading_scale = float(radius), float(heading_scale)
@@ -154,6 +162,11 @@ class ModeTracker:
     def mean(self) -> Array:
         """The reported pose (3,): the EKF's, or the dominant mode's when it reports it."""
         return self._mode.mean.copy() if self._mode is not None else self.ekf.x
+
+    @property
+    def images_doubt(self) -> bool:
+        """The EKF's monitor doubted the last step's images (its drift or offset test)."""
+        return self.ekf.images_doubt
 
     @property
     def cov(self) -> Array:

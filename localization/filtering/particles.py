@@ -396,12 +396,13 @@ class ParticleBelief(ParticleContactMixin, ParticleStatusMixin, ParticleStateMix
     def _track(self, u: ArrayLike, w: Array, contact: tuple[frozenset[str], float | None]
                ) -> None:
         """Step the mode tracker (``contact``: what this step touched and where); a report
-        most particles disagree with is "doubtful"."""
+        most particles disagree with, or whose images its monitor doubts, is "doubtful"."""
         if self.tracker is None:
             return
         source = self.tracker.step(u, w, self.particles, self.weights, self.modes[0], *contact)
-        unsupported = source == "ekf" and self.tracker.support < self.tracker.support_weight
-        if unsupported and self.status == "tracking":
+        doubted = source == "ekf" and (self.tracker.support < self.tracker.support_weight
+                                       or self.tracker.images_doubt)
+        if doubted and self.status == "tracking":
             self.status = "doubtful"
 
     def _resample(self, log_w: Array, n_inject: int, w: Array) -> None:

@@ -203,8 +203,14 @@ def belief_options(args: RobustnessConfig, source: str, condition: str = "nomina
     if source == "ekf" and args.detect_divergence and one_map:
         detect = {"offset_doubt": args.offset_doubt} if args.offset_doubt > 0 else True
         options["filter_options"] = {"detect_divergence": detect}
-    if source == "particles" and args.particle_unmapped != "floor":
-        options["filter_options"] = {"unmapped": args.particle_unmapped}
+    if source == "particles":
+        extra: dict[str, Any] = {}
+        if args.particle_unmapped != "floor":
+            extra["unmapped"] = args.particle_unmapped
+        if args.offset_doubt > 0:
+            extra["track_mode"] = {"offset_doubt": args.offset_doubt}
+        if extra:
+            options["filter_options"] = extra
     return options
 
 
@@ -244,6 +250,7 @@ def task_path(task: RobustTask) -> Path:
             f"{task.seeds[-1]}_{task.config.image_size}px_{task.config.max_steps}"
             f"{_detect_mark(extra)}"
             f"{'_unmapped-' + extra['unmapped'] if 'unmapped' in extra else ''}"
+            f"{'_offset{:g}'.format(extra['track_mode']['offset_doubt']) if 'track_mode' in extra else ''}"
             f"{'_guard' if options.get('image_pose') and task.agent == 'scripted' else ''}"
             f"{_on_daylight(task)}.json")
     return Path(task.config.out_dir) / "robustness" / "episodes" / name

@@ -97,9 +97,10 @@ class RobustnessConfig:
                 "section 11); rows on the randomised localizer of experiences (several "
                 "maps, which the monitor refuses) keep the plain EKF"})
     offset_doubt: float = field(default=0.0, metadata={
-        "help": "the EKF rows' divergence monitor also calls the belief doubtful while the "
-                "images agree on a place this many metres (beyond 3 sigma) off it "
-                "(DivergenceMonitor(offset_doubt=...), status only; 0: off)"})
+        "help": "the belief also calls itself doubtful while the images put the robot this "
+                "many metres (beyond 3 sigma) off it (status only; 0: off): on the EKF rows "
+                "their divergence monitor's DivergenceMonitor(offset_doubt=...), on the particle "
+                "rows their mode tracker's ModeTracker(offset_doubt=...)"})
     guard: bool = field(default=True, metadata={
         "help": "the scripted agent's image guard (ScriptedAgent(guard=True), agents.guard): "
                 "no forward step that the latest image's own pose estimate says runs into a "

@@ -155,6 +155,41 @@ def test_the_tracker_ekf_has_the_drift_test_alone(localizer):
         ModeTracker(localizer, model, drift="yes")
 
 
+def test_the_tracker_ekf_has_the_offset_test_on_request(localizer):
+    """``offset_doubt``: the tracker's EKF runs the monitor's offset test (status only), with
+    or without the drift test; no doubt before any image."""
+    from localization.filtering.divergence import DRIFT_DISTANCE
+    from localization.filtering.mode_tracker import ModeTracker
+
+    model = UnicycleModel(DT)
+    monitor = ModeTracker(localizer, model, offset_doubt=0.5).ekf.monitor
+    assert monitor.drift_only and monitor.offset_doubt == 0.5 and monitor.drift_distance is None
+    both = ModeTracker(localizer, model, drift=True, offset_doubt=0.3).ekf.monitor
+    assert both.drift_distance == DRIFT_DISTANCE and both.offset_doubt == 0.3
+    assert not ModeTracker(localizer, model, offset_doubt=0.5).images_doubt
+    with pytest.raises(ValueError, match="offset_doubt"):
+        ModeTracker(localizer, model, offset_doubt=-1.0)
+
+
+def test_a_report_whose_images_the_tracker_doubts_is_doubtful(localizer, features,
+                                                               monkeypatch):
+    """A right start tracks; once the tracker's monitor doubts the images (its offset test,
+    stubbed here: the scenario is the robustness benchmark's push rows), the belief says
+    "doubtful" instead of "tracking"."""
+    from localization.filtering.mode_tracker import ModeTracker
+
+    W, poses, controls = features
+    seen = {}
+    for doubt in (False, True):
+        monkeypatch.setattr(ModeTracker, "images_doubt", property(lambda self: doubt))
+        pf = _belief(localizer)
+        pf.reset(W[0], x0=poses[0])
+        for k in range(5):
+            pf.step(controls[k], W[k + 1])
+        seen[doubt] = pf.belief_status
+    assert seen == {False: "tracking", True: "doubtful"}
+
+
 @pytest.mark.parametrize("tracker_map", [True, False], ids=["tracker with the map", "without"])
 def test_a_contact_the_tracker_ekf_cannot_explain_moves_it_to_the_wall(localizer, features,
                                                                      tracker_map: bool):

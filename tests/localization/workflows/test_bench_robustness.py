@@ -227,12 +227,15 @@ def test_the_offset_doubt_goes_to_the_ekf_monitor_and_keys_its_records() -> None
     offset = RobustnessConfig(guard=False, offset_doubt=0.5)
     assert belief_options(offset, "ekf")["filter_options"] == {
         "detect_divergence": {"offset_doubt": 0.5}}
-    assert "filter_options" not in belief_options(offset, "particles")
+    assert belief_options(offset, "particles")["filter_options"] == {
+        "track_mode": {"offset_doubt": 0.5}}
     assert "filter_options" not in belief_options(  # no monitor, so no offset test
         RobustnessConfig(guard=False, offset_doubt=0.5, detect_divergence=False), "ekf")
     names = [task_path(RobustTask(c, 21, "push", "ekf", "scripted", (1, 2))).name
              for c in (RobustnessConfig(guard=False), offset)]
     assert names[0].endswith("_detect.json") and names[1].endswith("_detect-offset0.5.json")
+    name = task_path(RobustTask(offset, 21, "push", "particles", "scripted", (1, 2))).name
+    assert name.endswith("_offset0.5.json")
     for bad in (-0.5, float("nan")):
         with pytest.raises(ValueError, match="offset_doubt"):
             RobustnessConfig(offset_doubt=bad).lists()
