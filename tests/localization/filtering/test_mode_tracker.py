@@ -181,7 +181,7 @@ def test_a_report_whose_images_the_tracker_doubts_is_doubtful(localizer, feature
     W, poses, controls = features
     seen = {}
     for doubt in (False, True):
-        monkeypatch.setattr(ModeTracker, "images_doubt", property(lambda self: doubt))
+        monkeypatch.setattr(ModeTracker, "images_doubt", property(lambda self, d=doubt: d))
         pf = _belief(localizer)
         pf.reset(W[0], x0=poses[0])
         for k in range(5):
