@@ -248,20 +248,23 @@ def task_path(task: RobustTask) -> Path:
     extra = options.get("filter_options", {})
     name = (f"{task.agent}_{task.source}_{task.condition}_{task.city}_{task.seeds[0]}-"
             f"{task.seeds[-1]}_{task.config.image_size}px_{task.config.max_steps}"
-            f"{_detect_mark(extra)}"
-            f"{'_unmapped-' + extra['unmapped'] if 'unmapped' in extra else ''}"
-            f"{'_offset{:g}'.format(extra['track_mode']['offset_doubt']) if 'track_mode' in extra else ''}"
+            f"{_filter_marks(extra)}"
             f"{'_guard' if options.get('image_pose') and task.agent == 'scripted' else ''}"
             f"{_on_daylight(task)}.json")
     return Path(task.config.out_dir) / "robustness" / "episodes" / name
 
 
-def _detect_mark(filter_options: dict[str, Any]) -> str:
-    """A file-name mark of the EKF's divergence monitor and its offset test."""
+def _filter_marks(filter_options: dict[str, Any]) -> str:
+    """File-name marks of a row's filter options: the EKF's divergence monitor (and its
+    offset test), the particles' unmapped score and their tracker's offset test."""
     detect = filter_options.get("detect_divergence")
-    if detect is None:
-        return ""
-    return "_detect" + (f"-offset{detect['offset_doubt']:g}" if isinstance(detect, dict) else "")
+    marks = "" if detect is None else "_detect" + (
+        f"-offset{detect['offset_doubt']:g}" if isinstance(detect, dict) else "")
+    if "unmapped" in filter_options:
+        marks += f"_unmapped-{filter_options['unmapped']}"
+    if "track_mode" in filter_options:
+        marks += f"_offset{filter_options['track_mode']['offset_doubt']:g}"
+    return marks
 
 
 def _on_daylight(task: RobustTask) -> str:
