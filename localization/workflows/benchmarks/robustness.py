@@ -207,8 +207,8 @@ def belief_options(args: RobustnessConfig, source: str, condition: str = "nomina
         extra: dict[str, Any] = {}
         if args.particle_unmapped != "floor":
             extra["unmapped"] = args.particle_unmapped
-        if args.offset_doubt > 0:
-            extra["track_mode"] = {"offset_doubt": args.offset_doubt}
+        if args.particle_offset_doubt > 0:
+            extra["track_mode"] = {"offset_doubt": args.particle_offset_doubt}
         if extra:
             options["filter_options"] = extra
     return options

@@ -224,11 +224,13 @@ def test_the_offset_doubt_goes_to_the_ekf_monitor_and_keys_its_records() -> None
         task_path,
     )
 
-    offset = RobustnessConfig(guard=False, offset_doubt=0.5)
+    offset = RobustnessConfig(guard=False, offset_doubt=0.5, particle_offset_doubt=0.5)
     assert belief_options(offset, "ekf")["filter_options"] == {
         "detect_divergence": {"offset_doubt": 0.5}}
     assert belief_options(offset, "particles")["filter_options"] == {
         "track_mode": {"offset_doubt": 0.5}}
+    assert belief_options(RobustnessConfig(guard=False, offset_doubt=0.5), "particles") == \
+        belief_options(RobustnessConfig(guard=False), "particles")  # each belief its own
     assert "filter_options" not in belief_options(  # no monitor, so no offset test
         RobustnessConfig(guard=False, offset_doubt=0.5, detect_divergence=False), "ekf")
     names = [task_path(RobustTask(c, 21, "push", "ekf", "scripted", (1, 2))).name
@@ -239,3 +241,5 @@ def test_the_offset_doubt_goes_to_the_ekf_monitor_and_keys_its_records() -> None
     for bad in (-0.5, float("nan")):
         with pytest.raises(ValueError, match="offset_doubt"):
             RobustnessConfig(offset_doubt=bad).lists()
+        with pytest.raises(ValueError, match="particle_offset_doubt"):
+            RobustnessConfig(particle_offset_doubt=bad).lists()
