@@ -59,7 +59,9 @@ their evidence:
   the truth (an agreement within 0.5 m never held) and an aliased one lies metres away,
   which a mean would follow. A belief shoved 1.5 m sideways with position std 0.14 m
   accepted its images and said "tracking" on 43 of the 90 steps it took to creep back
-  within 1 m (tuning city 13, seed 3000003, stop 74). Off by default (None).
+  within 1 m (tuning city 13, seed 3000003, stop 74). Off by default (None): at 0.4 m it
+  passed its rule on tuning cities 13-14 (misled steps -58 %), but held out the scripted
+  agent, slowed while doubtful, lost pushed goals to timeouts (docs/benchmarks.md §11).
 
 A strong contradiction or psi*'s disagreement marks the belief "lost" (reported, nothing
 changed). Both together, while the filter also rejected at least ``min_rejected`` of the
