@@ -206,6 +206,7 @@ def summarize(episodes: Sequence[Episode]) -> dict[str, float]:
     n = len(episodes)
     ok = [e for e in episodes if e.success]
     p = len(ok) / n
+    misled = [e.misled_steps for e in episodes if e.misled_steps is not None]
     out: dict[str, float] = {"episodes": n, "success_rate": p,
                              "success_rate_se": float(np.sqrt(p * (1 - p) / n))}
     for name, values in (("spl", [e.spl for e in episodes]),
@@ -216,16 +217,11 @@ def summarize(episodes: Sequence[Episode]) -> dict[str, float]:
                          ("tipped_over_episodes", [e.tipped_over for e in episodes]),
                          ("time_to_goal", [e.time for e in ok]),
                          ("path_ratio", [e.path_ratio for e in ok]),
-                         ("misled_steps_per_episode", _misled(episodes)),
-                         ("misled_episodes", [m > 0 for m in _misled(episodes)])):
+                         ("misled_steps_per_episode", misled),
+                         ("misled_episodes", [m > 0 for m in misled])):
         out[name], out[f"{name}_se"] = mean_and_se(values)
     out["belief_rmse"], out["belief_rmse_se"] = _rmse_and_se([e.belief_rmse for e in episodes])
     return out
-
-
-def _misled(episodes: Sequence[Episode]) -> list[int]:
-    """The misled steps of the episodes that measured them."""
-    return [e.misled_steps for e in episodes if e.misled_steps is not None]
 
 
 def _rmse_and_se(episode_rmse: Sequence[float]) -> tuple[float, float]:

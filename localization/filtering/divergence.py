@@ -377,8 +377,9 @@ class DivergenceMonitor:
         recent = None if self.offset_doubt is None else self._recent_from_new_views()
         if recent is None:
             return False
-        median = np.array([*np.median(recent[:, :2], axis=0), 0.0])
-        return bool(self._beyond_3_sigma(median[None], x, P)[0][0] > self.offset_doubt)
+        median = np.median(recent[:, :2], axis=0)
+        far = float(np.hypot(*(median - x[:2]))) - 3.0 * position_std(P)
+        return far > self.offset_doubt
 
     def _agreeing_mean(self, psis: Array) -> Array | None:
         """The mean pose (3,) of psi* values (n, 3) all within ``drift_distance`` /
