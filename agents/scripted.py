@@ -25,7 +25,7 @@ from agents.planner import (
 )
 from agents.recovery import LOOK_TOLERANCE, STOP_STATUSES, Recovery, street_axis
 from envs.driving import bearing, pursuit_turn_rate
-from localization._validation import check_array, check_bool, check_real
+from localization._validation import check_array, check_bool, check_int, check_real
 from localization.geometry import Array
 
 __all__ = ["BELIEF_KEYS", "LOOK_TOLERANCE", "PLANS", "SLOW_STATUSES", "STOP_STATUSES", "Navigator",
@@ -159,6 +159,9 @@ class ScriptedAgent:
     back_off_speed : float — reversing speed (m/s).
     look_rate : float — turn rate (rad/s) while it looks around, lost.
     look_dwell : int — steps it looks along each street axis while lost.
+    slow_steps : int or None — the most consecutive steps of a slow status it drives at
+        ``slow_factor`` before it drives at full speed again (until the status has been
+        "tracking" or "lost" for a step); None: for as long as the status lasts.
     guard : bool — veto driving forward into a building from where the latest image alone
         puts the robot (``info["image_pose"]``, :class:`~agents.guard.ImageGuard`).
 
@@ -172,7 +175,7 @@ class ScriptedAgent:
     ``back_off_speed``; while ``info["belief_status"]`` is "lost" it does not steer on the
     belief but stops and looks along the street axes (``look_rate``, ``look_dwell``).
     "relocalizing", "doubtful" or "ambiguous" scale the speed by
-    ``slow_factor`` (0.25: on tuning cities 13-14, robots pushed off their lane on the
+    ``slow_factor`` (for at most ``slow_steps`` steps at a stretch) (0.25: on tuning cities 13-14, robots pushed off their lane on the
     particle belief touched a wall for 0.50 steps per episode against 0.83 at 0.5, 100
     episodes, at 0.9 s more per goal; at 0 the agent stalled, 0.95 of the goals).
     The status and the bumper come through ``info``, not the observation, so every pose
@@ -184,8 +187,12 @@ class ScriptedAgent:
                  turn_in_place: float = 0.6, replan_distance: float = 1.0,
                  look_rate: float = 0.5, slow_factor: float = 0.25, plan: str = "drive",
                  back_off_steps: int = 5, back_off_speed: float = 0.3,
-                 look_dwell: int = 10, guard: bool = False) -> None:
+                 look_dwell: int = 10, guard: bool = False, slow_steps: int | None = None
+                 ) -> None:
         self.navigator = Navigator(city, replan_distance, plan)
+        self.slow_steps = None if slow_steps is None else check_int(slow_steps, "slow_steps",
+                                                                    low=1)
+        self._slow_run = 0
         self.recovery = Recovery(w_max, back_off_steps, back_off_speed, look_rate, look_dwell)
         self.slow_factor = check_real(slow_factor, "slow_factor", low=0.0, high=1.0)
         self.guard = ImageGuard(city) if check_bool(guard, "guard") else None
@@ -198,6 +205,7 @@ class ScriptedAgent:
         """Forget the current plan (and stop reversing)."""
         self.navigator.reset()
         self.recovery.reset()
+        self._slow_run = 0
 
     @property
     def path(self) -> Array | None:
@@ -209,14 +217,23 @@ class ScriptedAgent:
             ) -> NDArray[np.float32]:
         """The action U = [v, w] for one belief observation (and the step's ``info``)."""
         mean, _, goal = check_belief_observation(obs)
+        slow = self._slow(info)
         u_recover = self.recovery.act(float(mean[2]), info)
         if u_recover is not None:
             return u_recover
         path = self.navigator.update(mean, goal, OBS_NAMES)
         u = pure_pursuit(mean, path.ahead(self.lookahead), path.remaining(), self.speed,
                          self.w_max, self.turn_in_place)
-        if info is not None and info.get("belief_status") in SLOW_STATUSES:
+        if slow:
             u[0] *= self.slow_factor
         if self.guard is not None:
             u = self.guard.filter(u, mean, info)
         return u.astype(np.float32)
+
+    def _slow(self, info: Mapping[str, Any] | None) -> bool:
+        """Whether this step drives at ``slow_factor``: a slow status, within ``slow_steps``
+        consecutive steps of it (counted on every step, recovering ones included)."""
+        status = None if info is None else info.get("belief_status")
+        self._slow_run = self._slow_run + 1 if status in SLOW_STATUSES else 0
+        return self._slow_run > 0 and (self.slow_steps is None
+                                       or self._slow_run <= self.slow_steps)

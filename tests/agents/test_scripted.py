@@ -158,6 +158,44 @@ def test_agent_does_not_steer_on_a_lost_belief() -> None:
         assert slow[0] == pytest.approx(0.5 * tracking[0]) and slow[1] == pytest.approx(tracking[1])
 
 
+def test_slow_steps_bound_each_stretch_of_a_slow_status() -> None:
+    """``slow_steps=3``: the first three steps of a slow stretch at the slow factor, then full
+    speed; a step of another status ends the stretch (lost counts, a recovering step too);
+    reset starts afresh. None (the default) slows for as long as the status lasts."""
+    env = gym.make("AppearanceNav-v0", scene_seed=0)
+    obs, info = env.reset(seed=3)
+    env.close()
+    city = env.unwrapped.city
+    agent = ScriptedAgent(city, slow_factor=0.5, slow_steps=3, back_off_steps=1)
+    pose = info["pose"].copy()
+    agent.act(_belief(pose, obs["goal"]))  # plans; then face the carrot: no turn on the spot
+    carrot = agent.navigator.path.ahead(agent.lookahead)
+    pose[2] = np.arctan2(carrot[1] - pose[1], carrot[0] - pose[0])
+    belief = _belief(pose, obs["goal"])
+    full = agent.act(belief, {"belief_status": "tracking"})[0]
+    assert full > 0
+
+    def speeds(statuses: list[str]) -> list[float]:
+        return [float(agent.act(belief, {"belief_status": s})[0]) for s in statuses]
+
+    doubt = speeds(["doubtful", "relocalizing", "doubtful", "doubtful", "ambiguous"])
+    assert doubt == pytest.approx([0.5 * full] * 3 + [full] * 2)
+    assert speeds(["tracking", "doubtful", "doubtful"]) == pytest.approx(
+        [full, 0.5 * full, 0.5 * full])
+    agent.act(belief, {"belief_status": "lost"})  # a look around ends the stretch too
+    assert speeds(["doubtful"]) == pytest.approx([0.5 * full])
+    assert agent.act(belief, {"belief_status": "doubtful", "collision": True})[0] < 0  # counted
+    assert speeds(["doubtful", "doubtful"]) == pytest.approx([0.5 * full, full])
+    agent.reset()
+    assert speeds(["doubtful"]) == pytest.approx([0.5 * full])
+    unbounded = ScriptedAgent(city, slow_factor=0.5)
+    assert [float(unbounded.act(belief, {"belief_status": "doubtful"})[0])
+            for _ in range(50)] == pytest.approx([0.5 * full] * 50)
+    for bad, error in ((0, ValueError), (-2, ValueError), (2.5, TypeError), (True, TypeError)):
+        with pytest.raises(error, match="slow_steps"):
+            ScriptedAgent(city, slow_steps=bad)
+
+
 def test_a_lost_agent_turns_to_the_street_axes_and_looks_along_each() -> None:
     """ "lost": turn on the spot the short way to the street axis nearest the believed
     heading, stop there ``look_dwell`` steps, then a quarter turn on to the next axis; a

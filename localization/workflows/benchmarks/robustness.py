@@ -217,7 +217,8 @@ def belief_options(args: RobustnessConfig, source: str, condition: str = "nomina
 def make_agent(args: RobustnessConfig, agent: str, source: str, city: Any) -> Any:
     """The scripted navigator, or the PPO policy trained on the row's kind of pose."""
     if agent == "scripted":
-        return ScriptedAgent(city, guard=args.guard and source in FILTERS)
+        return ScriptedAgent(city, guard=args.guard and source in FILTERS,
+                             slow_steps=args.slow_steps or None)
     from agents.ppo import PPOAgent
 
     return PPOAgent.load(policy_path(args, source), city)
@@ -250,6 +251,7 @@ def task_path(task: RobustTask) -> Path:
             f"{task.seeds[-1]}_{task.config.image_size}px_{task.config.max_steps}"
             f"{_filter_marks(extra)}"
             f"{'_guard' if options.get('image_pose') and task.agent == 'scripted' else ''}"
+            f"{_slow_mark(task)}"
             f"{_on_daylight(task)}.json")
     return Path(task.config.out_dir) / "robustness" / "episodes" / name
 
@@ -265,6 +267,12 @@ def _filter_marks(filter_options: dict[str, Any]) -> str:
     if "track_mode" in filter_options:
         marks += f"_offset{filter_options['track_mode']['offset_doubt']:g}"
     return marks
+
+
+def _slow_mark(task: RobustTask) -> str:
+    """A file-name mark of the scripted agent's bound on slow steps (none: unbounded)."""
+    steps = task.config.slow_steps
+    return f"_slow{steps}" if steps and task.agent == "scripted" else ""
 
 
 def _on_daylight(task: RobustTask) -> str:

@@ -107,6 +107,10 @@ class RobustnessConfig:
         "help": "the same test on the particle rows, through their mode tracker "
                 "(ModeTracker(offset_doubt=...); 0: off). 0.4 passed its rule on tuning "
                 "cities 13-14; held out pushed contact steps rose 0.110 -> 0.170, so off"})
+    slow_steps: int = field(default=0, metadata={
+        "help": "the scripted agent slows down for at most this many consecutive steps of a "
+                "slow status (ScriptedAgent(slow_steps=...)), then drives at full speed until "
+                "the status changes; 0: for as long as the status lasts"})
     guard: bool = field(default=True, metadata={
         "help": "the scripted agent's image guard (ScriptedAgent(guard=True), agents.guard): "
                 "no forward step that the latest image's own pose estimate says runs into a "
@@ -158,6 +162,10 @@ class RobustnessConfig:
             if not getattr(self, name) >= 0:  # NaN too
                 raise ValueError(f"robustness {name} must be >= 0 (0: off), got "
                                  f"{getattr(self, name)!r}")
+        if isinstance(self.slow_steps, bool) or not isinstance(self.slow_steps, int) or (
+                self.slow_steps < 0):
+            raise ValueError(f"robustness slow_steps must be an integer >= 0 (0: no bound), "
+                             f"got {self.slow_steps!r}")
         if self.daylight_lanes not in DAYLIGHT_LANES:
             raise ValueError(f"robustness daylight_lanes must be one of {DAYLIGHT_LANES}, got "
                              f"{self.daylight_lanes!r}")

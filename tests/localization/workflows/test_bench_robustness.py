@@ -6,6 +6,7 @@ import json
 import shutil
 from pathlib import Path
 
+import gymnasium as gym
 import pytest
 
 from agents.evaluation import Episode
@@ -243,3 +244,23 @@ def test_the_offset_doubt_goes_to_the_ekf_monitor_and_keys_its_records() -> None
             RobustnessConfig(offset_doubt=bad).lists()
         with pytest.raises(ValueError, match="particle_offset_doubt"):
             RobustnessConfig(particle_offset_doubt=bad).lists()
+
+
+def test_slow_steps_go_to_the_scripted_agent_and_key_its_records() -> None:
+    from localization.workflows.benchmarks.robustness import (
+        RobustnessConfig,
+        RobustTask,
+        make_agent,
+        task_path,
+    )
+
+    city = gym.make("AppearanceNav-v0", scene_seed=0).unwrapped.city
+    bounded, plain = RobustnessConfig(slow_steps=30), RobustnessConfig()
+    assert make_agent(bounded, "scripted", "ekf", city).slow_steps == 30
+    assert make_agent(plain, "scripted", "ekf", city).slow_steps is None  # 0: unbounded
+    names = [task_path(RobustTask(c, 21, "push", "ekf", "scripted", (1, 2))).name
+             for c in (plain, bounded)]
+    assert names[1] == names[0].replace(".json", "_slow30.json")
+    for bad in (-1, 2.5, True):
+        with pytest.raises(ValueError, match="slow_steps"):
+            RobustnessConfig(slow_steps=bad).lists()
