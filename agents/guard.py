@@ -14,6 +14,13 @@ bring the robot's disc (``ROBOT_RADIUS + margin``) closer to a building than it 
 where that clearance is short. If it would, the pilot does not drive forward this step (v = 0;
 it may still turn). The belief itself is not touched. An image pose farther than ``radius``
 from the belief (an aliased image) or inside a building is ignored.
+
+A veto can hold forever: a vetoed robot does not move, so it sends the same command again.
+Passing a building corner 0.56 m off (inside ``ROBOT_RADIUS + margin``) with a right belief,
+every forward rollout dips a few centimetres nearer the corner, and one robot stood 520 steps
+(tuning city 13, docs/benchmarks.md section 11, stop 75). With ``patience`` set, after that
+many consecutive vetoes the guard yields: it lets ``yield_steps`` forward commands through
+(the bumper and the pilot's back-off still act), then guards again.
 """
 
 from __future__ import annotations
@@ -63,16 +70,27 @@ class ImageGuard:
     margin : float — metres of clearance beyond ``ROBOT_RADIUS`` (>= 0).
     radius : float — image poses farther than this (m) from the belief are ignored (> 0).
     n_points : int — points of the rolled-out arc that are checked (>= 1).
+    patience : int or None — consecutive vetoes after which it yields (>= 1); None: never.
+    yield_steps : int — steps it then lets forward commands through (>= 1).
     """
 
     def __init__(self, city: Any, horizon: float = GUARD_HORIZON, margin: float = GUARD_MARGIN,
-                 radius: float = GUARD_RADIUS, n_points: int = 5) -> None:
+                 radius: float = GUARD_RADIUS, n_points: int = 5, patience: int | None = None,
+                 yield_steps: int = 10) -> None:
         self.city = city
         self.horizon = check_real(horizon, "horizon", low=0.0, low_open=True)
         self.margin = check_real(margin, "margin", low=0.0)
         self.radius = check_real(radius, "radius", low=0.0, low_open=True)
         self.n_points = check_int(n_points, "n_points", low=1)
+        self.patience = None if patience is None else check_int(patience, "patience", low=1)
+        self.yield_steps = check_int(yield_steps, "yield_steps", low=1)
         self.vetoes = 0
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the run of vetoes and any yield (call between episodes)."""
+        self._run = 0  # consecutive vetoes
+        self._yielding = 0  # steps of yielding left
 
     def blocks(self, u: Array, mean: Array, info: Mapping[str, Any] | None) -> bool:
         """Whether the forward command ``u`` (2,) should not be driven, from the belief mean
@@ -94,9 +112,17 @@ class ImageGuard:
         return ahead < ROBOT_RADIUS + self.margin and ahead < start
 
     def filter(self, u: Array, mean: Array, info: Mapping[str, Any] | None) -> Array:
-        """``u`` with v = 0 when :meth:`blocks` (counted in ``vetoes``)."""
-        if self.blocks(u, mean, info):
-            self.vetoes += 1
-            u = u.copy()
-            u[0] = 0.0
+        """``u`` with v = 0 when :meth:`blocks` (counted in ``vetoes``), unless it yields."""
+        if self._yielding > 0:
+            self._yielding -= 1
+            return u
+        if not self.blocks(u, mean, info):
+            self._run = 0
+            return u
+        self.vetoes += 1
+        self._run += 1
+        if self.patience is not None and self._run >= self.patience:
+            self._run, self._yielding = 0, self.yield_steps
+        u = u.copy()
+        u[0] = 0.0
         return u

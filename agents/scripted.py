@@ -164,6 +164,8 @@ class ScriptedAgent:
         "tracking" or "lost" for a step); None: for as long as the status lasts.
     guard : bool — veto driving forward into a building from where the latest image alone
         puts the robot (``info["image_pose"]``, :class:`~agents.guard.ImageGuard`).
+    guard_patience : int or None — the guard's ``patience``: consecutive vetoes after which
+        it lets forward commands through for a while (None: it never yields).
 
     Notes
     -----
@@ -187,15 +189,16 @@ class ScriptedAgent:
                  turn_in_place: float = 0.6, replan_distance: float = 1.0,
                  look_rate: float = 0.5, slow_factor: float = 0.25, plan: str = "drive",
                  back_off_steps: int = 5, back_off_speed: float = 0.3,
-                 look_dwell: int = 10, guard: bool = False, slow_steps: int | None = None
-                 ) -> None:
+                 look_dwell: int = 10, guard: bool = False, slow_steps: int | None = None,
+                 guard_patience: int | None = None) -> None:
         self.navigator = Navigator(city, replan_distance, plan)
         self.slow_steps = None if slow_steps is None else check_int(slow_steps, "slow_steps",
                                                                     low=1)
         self._slow_run = 0
         self.recovery = Recovery(w_max, back_off_steps, back_off_speed, look_rate, look_dwell)
         self.slow_factor = check_real(slow_factor, "slow_factor", low=0.0, high=1.0)
-        self.guard = ImageGuard(city) if check_bool(guard, "guard") else None
+        self.guard = (ImageGuard(city, patience=guard_patience) if check_bool(guard, "guard")
+                      else None)
         self.lookahead, self.speed, self.w_max, self.turn_in_place = (
             check_real(v, name, low=0.0, low_open=True) for name, v in (
                 ("lookahead", lookahead), ("speed", speed), ("w_max", w_max),
@@ -206,6 +209,8 @@ class ScriptedAgent:
         self.navigator.reset()
         self.recovery.reset()
         self._slow_run = 0
+        if self.guard is not None:
+            self.guard.reset()
 
     @property
     def path(self) -> Array | None:

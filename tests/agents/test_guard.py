@@ -73,6 +73,45 @@ def test_scripted_agent_stops_short_of_the_wall(city, facing_wall):
     assert guarded.act(belief, info)[0] > 0
 
 
+def test_patience_ends_a_veto_that_would_hold_forever(city, facing_wall):
+    """A vetoed robot does not move and sends the same command again: without patience the
+    veto holds for ever; with ``patience=3, yield_steps=2`` three vetoes, two commands let
+    through, then it guards again. A command that passes ends the run of vetoes; reset too."""
+    info, u = {"image_pose": facing_wall}, np.array([0.9, 0.0])
+
+    def speeds(guard: ImageGuard, n: int) -> list[float]:
+        return [float(guard.filter(u, facing_wall, info)[0]) for _ in range(n)]
+
+    assert speeds(ImageGuard(city), 50) == [0.0] * 50
+    guard = ImageGuard(city, patience=3, yield_steps=2)
+    assert speeds(guard, 8) == [0.0, 0.0, 0.0, 0.9, 0.9, 0.0, 0.0, 0.0]
+    assert guard.vetoes == 6
+    away = facing_wall + [0.0, 0.0, np.pi]
+    guard = ImageGuard(city, patience=3, yield_steps=2)
+    assert speeds(guard, 2) == [0.0, 0.0]
+    guard.filter(u, facing_wall, {"image_pose": away})  # passes: the run starts again
+    assert speeds(guard, 3) == [0.0, 0.0, 0.0]
+    guard.reset()
+    assert speeds(guard, 3) == [0.0, 0.0, 0.0]
+    for bad in (0, -1):
+        with pytest.raises(ValueError, match="patience"):
+            ImageGuard(city, patience=bad)
+        with pytest.raises(ValueError, match="yield_steps"):
+            ImageGuard(city, yield_steps=bad)
+
+
+def test_scripted_agent_passes_its_patience_to_the_guard(city, facing_wall):
+    goal = facing_wall[:2] + [-6.0, 0.0]
+    belief = {"pose_mean": facing_wall + [0.0, 0.0, np.pi], "pose_cov": np.ones(6) * 0.01,
+              "goal": goal}
+    info = {"belief_status": "tracking", "image_pose": facing_wall}
+    agent = ScriptedAgent(city, guard=True, guard_patience=2)
+    assert agent.guard.patience == 2 and ScriptedAgent(city, guard=True).guard.patience is None
+    assert [agent.act(belief, info)[0] > 0 for _ in range(3)] == [False, False, True]
+    agent.reset()  # a new episode forgets the yield
+    assert agent.act(belief, info)[0] == 0.0
+
+
 def test_bad_settings(city):
     with pytest.raises(TypeError, match="guard must be True or False"):
         ScriptedAgent(city, guard="yes")

@@ -218,7 +218,8 @@ def make_agent(args: RobustnessConfig, agent: str, source: str, city: Any) -> An
     """The scripted navigator, or the PPO policy trained on the row's kind of pose."""
     if agent == "scripted":
         return ScriptedAgent(city, guard=args.guard and source in FILTERS,
-                             slow_steps=args.slow_steps or None)
+                             slow_steps=args.slow_steps or None,
+                             guard_patience=args.guard_patience or None)
     from agents.ppo import PPOAgent
 
     return PPOAgent.load(policy_path(args, source), city)
@@ -270,9 +271,14 @@ def _filter_marks(filter_options: dict[str, Any]) -> str:
 
 
 def _slow_mark(task: RobustTask) -> str:
-    """A file-name mark of the scripted agent's bound on slow steps (none: unbounded)."""
-    steps = task.config.slow_steps
-    return f"_slow{steps}" if steps and task.agent == "scripted" else ""
+    """File-name marks of the scripted agent's bound on slow steps and its guard's patience
+    (none: unbounded, never yields)."""
+    if task.agent != "scripted":
+        return ""
+    steps, patience = task.config.slow_steps, task.config.guard_patience
+    guarded = task.config.guard and task.source in FILTERS
+    return (f"_slow{steps}" if steps else "") + (f"_yield{patience}" if patience and guarded
+                                                 else "")
 
 
 def _on_daylight(task: RobustTask) -> str:

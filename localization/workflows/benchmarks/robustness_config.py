@@ -118,6 +118,10 @@ class RobustnessConfig:
                 "row: pushed contact steps per episode 0.255 -> 0.125 on the EKF, 0.305 -> 0.150 "
                 "on the particles; nominal success 1.00 and no contact either way, time to goal "
                 "+0.3 / +0.9 %); off: the agent steers on the belief alone"})
+    guard_patience: int = field(default=0, metadata={
+        "help": "the image guard yields after this many consecutive vetoes: it lets the "
+                "pilot's forward commands through for 10 steps (ImageGuard(patience=...)); a "
+                "vetoed robot does not move, so a veto can hold forever; 0: it never yields"})
     particle_unmapped: str = field(default="floor", metadata={
         "help": "what the particle rows' particles get where the maps are undefined "
                 "(ParticleFilter(unmapped=...)): floor (the gate's, as an outlier) or typical "
@@ -162,10 +166,11 @@ class RobustnessConfig:
             if not getattr(self, name) >= 0:  # NaN too
                 raise ValueError(f"robustness {name} must be >= 0 (0: off), got "
                                  f"{getattr(self, name)!r}")
-        if isinstance(self.slow_steps, bool) or not isinstance(self.slow_steps, int) or (
-                self.slow_steps < 0):
-            raise ValueError(f"robustness slow_steps must be an integer >= 0 (0: no bound), "
-                             f"got {self.slow_steps!r}")
+        for name in ("slow_steps", "guard_patience"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ValueError(f"robustness {name} must be an integer >= 0 (0: off), got "
+                                 f"{value!r}")
         if self.daylight_lanes not in DAYLIGHT_LANES:
             raise ValueError(f"robustness daylight_lanes must be one of {DAYLIGHT_LANES}, got "
                              f"{self.daylight_lanes!r}")

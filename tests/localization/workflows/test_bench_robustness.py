@@ -246,7 +246,7 @@ def test_the_offset_doubt_goes_to_the_ekf_monitor_and_keys_its_records() -> None
             RobustnessConfig(particle_offset_doubt=bad).lists()
 
 
-def test_slow_steps_go_to_the_scripted_agent_and_key_its_records() -> None:
+def test_slow_steps_and_guard_patience_go_to_the_scripted_agent_and_key_its_records() -> None:
     from localization.workflows.benchmarks.robustness import (
         RobustnessConfig,
         RobustTask,
@@ -264,3 +264,13 @@ def test_slow_steps_go_to_the_scripted_agent_and_key_its_records() -> None:
     for bad in (-1, 2.5, True):
         with pytest.raises(ValueError, match="slow_steps"):
             RobustnessConfig(slow_steps=bad).lists()
+        with pytest.raises(ValueError, match="guard_patience"):
+            RobustnessConfig(guard_patience=bad).lists()
+    patient = RobustnessConfig(guard_patience=20)
+    assert make_agent(patient, "scripted", "ekf", city).guard.patience == 20
+    assert make_agent(plain, "scripted", "ekf", city).guard.patience is None
+    assert task_path(RobustTask(patient, 21, "push", "ekf", "scripted", (1, 2))).name == \
+        names[0].replace(".json", "_yield20.json")
+    oracle = [task_path(RobustTask(c, 21, "push", "oracle", "scripted", (1, 2))).name
+              for c in (plain, patient)]
+    assert oracle[0] == oracle[1]  # no guard on the true pose: the same records
