@@ -20,7 +20,10 @@ Passing a building corner 0.56 m off (inside ``ROBOT_RADIUS + margin``) with a r
 every forward rollout dips a few centimetres nearer the corner, and one robot stood 520 steps
 (tuning city 13, docs/benchmarks.md section 11, stop 75). With ``patience`` set, after that
 many consecutive vetoes the guard yields: it lets ``yield_steps`` forward commands through
-(the bumper and the pilot's back-off still act), then guards again.
+(the bumper and the pilot's back-off still act), then guards again. With ``agree`` set it
+yields only while the image pose lies within ``agree`` metres of the belief mean: a belief
+that agrees with its image planned around the wall it is passing, while a pushed belief a
+metre off, the case the guard is for, is still guarded.
 """
 
 from __future__ import annotations
@@ -72,11 +75,13 @@ class ImageGuard:
     n_points : int — points of the rolled-out arc that are checked (>= 1).
     patience : int or None — consecutive vetoes after which it yields (>= 1); None: never.
     yield_steps : int — steps it then lets forward commands through (>= 1).
+    agree : float or None — metres: yield only while the image pose lies this close to the
+        belief mean (> 0); None: whatever the belief.
     """
 
     def __init__(self, city: Any, horizon: float = GUARD_HORIZON, margin: float = GUARD_MARGIN,
                  radius: float = GUARD_RADIUS, n_points: int = 5, patience: int | None = None,
-                 yield_steps: int = 10) -> None:
+                 yield_steps: int = 10, agree: float | None = None) -> None:
         self.city = city
         self.horizon = check_real(horizon, "horizon", low=0.0, low_open=True)
         self.margin = check_real(margin, "margin", low=0.0)
@@ -84,6 +89,8 @@ class ImageGuard:
         self.n_points = check_int(n_points, "n_points", low=1)
         self.patience = None if patience is None else check_int(patience, "patience", low=1)
         self.yield_steps = check_int(yield_steps, "yield_steps", low=1)
+        self.agree = None if agree is None else check_real(agree, "agree", low=0.0,
+                                                           low_open=True)
         self.vetoes = 0
         self.reset()
 
@@ -121,8 +128,16 @@ class ImageGuard:
             return u
         self.vetoes += 1
         self._run += 1
-        if self.patience is not None and self._run >= self.patience:
+        if self.patience is not None and self._run >= self.patience and self._agrees(mean, info):
             self._run, self._yielding = 0, self.yield_steps
         u = u.copy()
         u[0] = 0.0
         return u
+
+    def _agrees(self, mean: Array, info: Mapping[str, Any]) -> bool:
+        """Whether the image pose lies within ``agree`` of the belief mean (True without
+        ``agree``; only called on a veto, so the image pose is there and finite)."""
+        if self.agree is None:
+            return True
+        pose = np.asarray(info["image_pose"], dtype=np.float64)
+        return bool(np.hypot(*(pose[:2] - mean[:2])) <= self.agree)

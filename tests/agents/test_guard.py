@@ -100,6 +100,20 @@ def test_patience_ends_a_veto_that_would_hold_forever(city, facing_wall):
             ImageGuard(city, yield_steps=bad)
 
 
+def test_with_agree_it_yields_only_to_a_belief_that_agrees_with_the_image(city, facing_wall):
+    """``agree=0.3``: a belief 1.3 m off the image (a push) stays guarded however long; one
+    0.1 m off gets the yield after ``patience`` vetoes."""
+    info, u = {"image_pose": facing_wall}, np.array([0.9, 0.0])
+    guard = ImageGuard(city, patience=2, yield_steps=1, agree=0.3)
+    pushed = facing_wall + [0.0, 1.3, 0.0]
+    assert [float(guard.filter(u, pushed, info)[0]) for _ in range(20)] == [0.0] * 20
+    near = facing_wall + [0.1, 0.0, 0.0]
+    assert [float(guard.filter(u, near, info)[0]) for _ in range(4)] == [0.0, 0.9, 0.0, 0.0]
+    for bad in (0.0, -0.3, float("nan")):
+        with pytest.raises(ValueError, match="agree"):
+            ImageGuard(city, agree=bad)
+
+
 def test_scripted_agent_passes_its_patience_to_the_guard(city, facing_wall):
     goal = facing_wall[:2] + [-6.0, 0.0]
     belief = {"pose_mean": facing_wall + [0.0, 0.0, np.pi], "pose_cov": np.ones(6) * 0.01,
@@ -107,6 +121,7 @@ def test_scripted_agent_passes_its_patience_to_the_guard(city, facing_wall):
     info = {"belief_status": "tracking", "image_pose": facing_wall}
     agent = ScriptedAgent(city, guard=True, guard_patience=2)
     assert agent.guard.patience == 2 and ScriptedAgent(city, guard=True).guard.patience is None
+    assert ScriptedAgent(city, guard=True, guard_agree=0.3).guard.agree == 0.3
     assert [agent.act(belief, info)[0] > 0 for _ in range(3)] == [False, False, True]
     agent.reset()  # a new episode forgets the yield
     assert agent.act(belief, info)[0] == 0.0

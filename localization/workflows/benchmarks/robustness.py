@@ -217,12 +217,21 @@ def belief_options(args: RobustnessConfig, source: str, condition: str = "nomina
 def make_agent(args: RobustnessConfig, agent: str, source: str, city: Any) -> Any:
     """The scripted navigator, or the PPO policy trained on the row's kind of pose."""
     if agent == "scripted":
+        patience, agree = guard_settings(args, source)
         return ScriptedAgent(city, guard=args.guard and source in FILTERS,
-                             slow_steps=args.slow_steps or None,
-                             guard_patience=args.guard_patience or None)
+                             slow_steps=args.slow_steps or None, guard_patience=patience,
+                             guard_agree=agree)
     from agents.ppo import PPOAgent
 
     return PPOAgent.load(policy_path(args, source), city)
+
+
+def guard_settings(args: RobustnessConfig, source: str) -> tuple[int | None, float | None]:
+    """The scripted agent's guard patience and agreement radius on a row's pose source
+    (None: never yields, whatever the belief)."""
+    if source == "particles":
+        return args.particle_guard_patience or None, args.particle_guard_agree or None
+    return args.guard_patience or None, None
 
 
 def policy_path(args: RobustnessConfig, source: str) -> Path:
@@ -275,10 +284,11 @@ def _slow_mark(task: RobustTask) -> str:
     (none: unbounded, never yields)."""
     if task.agent != "scripted":
         return ""
-    steps, patience = task.config.slow_steps, task.config.guard_patience
-    guarded = task.config.guard and task.source in FILTERS
-    return (f"_slow{steps}" if steps else "") + (f"_yield{patience}" if patience and guarded
-                                                 else "")
+    steps = task.config.slow_steps
+    patience, agree = guard_settings(task.config, task.source)
+    guarded = task.config.guard and task.source in FILTERS and patience is not None
+    return ((f"_slow{steps}" if steps else "") + (f"_yield{patience}" if guarded else "")
+            + (f"-agree{agree:g}" if guarded and agree is not None else ""))
 
 
 def _on_daylight(task: RobustTask) -> str:

@@ -118,10 +118,19 @@ class RobustnessConfig:
                 "row: pushed contact steps per episode 0.255 -> 0.125 on the EKF, 0.305 -> 0.150 "
                 "on the particles; nominal success 1.00 and no contact either way, time to goal "
                 "+0.3 / +0.9 %); off: the agent steers on the belief alone"})
-    guard_patience: int = field(default=0, metadata={
-        "help": "the image guard yields after this many consecutive vetoes: it lets the "
-                "pilot's forward commands through for 10 steps (ImageGuard(patience=...)); a "
-                "vetoed robot does not move, so a veto can hold forever; 0: it never yields"})
+    guard_patience: int = field(default=20, metadata={
+        "help": "the EKF rows' image guard yields after this many consecutive vetoes: it lets "
+                "the pilot's forward commands through for 10 steps (ImageGuard(patience=...)); "
+                "a vetoed robot does not move, so a veto could hold for ever (a robot passing "
+                "a corner stood 520 steps on tuning city 13); 0: it never yields. 20 since "
+                "stop 75 (tuning 13-14 and held out 21-22: success and contact steps as "
+                "without it, pushed goals reached sooner; docs/benchmarks.md section 11)"})
+    particle_guard_patience: int = field(default=0, metadata={
+        "help": "the same for the particle rows' guard (0: it never yields). 20 failed its "
+                "rule on tuning cities 13-14 (pushed contact steps 0.080 -> 0.120)"})
+    particle_guard_agree: float = field(default=0.0, metadata={
+        "help": "m: the particle rows' guard yields only while the image pose lies this close "
+                "to the belief (ImageGuard(agree=...)); 0: whatever the belief"})
     particle_unmapped: str = field(default="floor", metadata={
         "help": "what the particle rows' particles get where the maps are undefined "
                 "(ParticleFilter(unmapped=...)): floor (the gate's, as an outlier) or typical "
@@ -162,11 +171,11 @@ class RobustnessConfig:
         if self.particle_unmapped not in UNMAPPED:
             raise ValueError(f"robustness particle_unmapped must be one of {UNMAPPED}, got "
                              f"{self.particle_unmapped!r}")
-        for name in ("offset_doubt", "particle_offset_doubt"):
+        for name in ("offset_doubt", "particle_offset_doubt", "particle_guard_agree"):
             if not getattr(self, name) >= 0:  # NaN too
                 raise ValueError(f"robustness {name} must be >= 0 (0: off), got "
                                  f"{getattr(self, name)!r}")
-        for name in ("slow_steps", "guard_patience"):
+        for name in ("slow_steps", "guard_patience", "particle_guard_patience"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ValueError(f"robustness {name} must be an integer >= 0 (0: off), got "

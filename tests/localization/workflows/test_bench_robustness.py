@@ -246,7 +246,7 @@ def test_the_offset_doubt_goes_to_the_ekf_monitor_and_keys_its_records() -> None
             RobustnessConfig(particle_offset_doubt=bad).lists()
 
 
-def test_slow_steps_and_guard_patience_go_to_the_scripted_agent_and_key_its_records() -> None:
+def test_slow_steps_go_to_the_scripted_agent_and_key_their_records() -> None:
     from localization.workflows.benchmarks.robustness import (
         RobustnessConfig,
         RobustTask,
@@ -255,7 +255,8 @@ def test_slow_steps_and_guard_patience_go_to_the_scripted_agent_and_key_its_reco
     )
 
     city = gym.make("AppearanceNav-v0", scene_seed=0).unwrapped.city
-    bounded, plain = RobustnessConfig(slow_steps=30), RobustnessConfig()
+    bounded, plain = (RobustnessConfig(slow_steps=30, guard_patience=0),
+                      RobustnessConfig(guard_patience=0))
     assert make_agent(bounded, "scripted", "ekf", city).slow_steps == 30
     assert make_agent(plain, "scripted", "ekf", city).slow_steps is None  # 0: unbounded
     names = [task_path(RobustTask(c, 21, "push", "ekf", "scripted", (1, 2))).name
@@ -264,13 +265,37 @@ def test_slow_steps_and_guard_patience_go_to_the_scripted_agent_and_key_its_reco
     for bad in (-1, 2.5, True):
         with pytest.raises(ValueError, match="slow_steps"):
             RobustnessConfig(slow_steps=bad).lists()
-        with pytest.raises(ValueError, match="guard_patience"):
-            RobustnessConfig(guard_patience=bad).lists()
-    patient = RobustnessConfig(guard_patience=20)
-    assert make_agent(patient, "scripted", "ekf", city).guard.patience == 20
-    assert make_agent(plain, "scripted", "ekf", city).guard.patience is None
-    assert task_path(RobustTask(patient, 21, "push", "ekf", "scripted", (1, 2))).name == \
-        names[0].replace(".json", "_yield20.json")
-    oracle = [task_path(RobustTask(c, 21, "push", "oracle", "scripted", (1, 2))).name
-              for c in (plain, patient)]
-    assert oracle[0] == oracle[1]  # no guard on the true pose: the same records
+        for name in ("guard_patience", "particle_guard_patience"):
+            with pytest.raises(ValueError, match=name):
+                RobustnessConfig(**{name: bad}).lists()
+    with pytest.raises(ValueError, match="particle_guard_agree"):
+        RobustnessConfig(particle_guard_agree=-0.3).lists()
+
+
+def test_guard_patience_is_set_per_belief_and_keys_the_records() -> None:
+    """The EKF rows' guard yields after 20 vetoes by default, the particle rows' never unless
+    asked (with an agreement radius); the true pose has no guard, so its records are the same."""
+    from localization.workflows.benchmarks.robustness import (
+        RobustnessConfig,
+        RobustTask,
+        make_agent,
+        task_path,
+    )
+
+    city = gym.make("AppearanceNav-v0", scene_seed=0).unwrapped.city
+    default, never = RobustnessConfig(), RobustnessConfig(guard_patience=0)
+    assert make_agent(default, "scripted", "ekf", city).guard.patience == 20
+    assert make_agent(never, "scripted", "ekf", city).guard.patience is None
+    guard = make_agent(default, "scripted", "particles", city).guard
+    assert guard.patience is None and guard.agree is None
+    agreeing = RobustnessConfig(particle_guard_patience=20, particle_guard_agree=0.3)
+    guard = make_agent(agreeing, "scripted", "particles", city).guard
+    assert guard.patience == 20 and guard.agree == 0.3
+
+    def name(config: RobustnessConfig, source: str) -> str:
+        return task_path(RobustTask(config, 21, "push", source, "scripted", (1, 2))).name
+
+    assert name(default, "ekf") == name(never, "ekf").replace(".json", "_yield20.json")
+    assert name(agreeing, "particles") == name(default, "particles").replace(
+        ".json", "_yield20-agree0.3.json")
+    assert name(default, "oracle") == name(never, "oracle") == name(agreeing, "oracle")
