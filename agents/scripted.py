@@ -178,10 +178,10 @@ class ScriptedAgent:
     (``info["collision"]``, a bump sensor) it reverses ``back_off_steps`` steps at
     ``back_off_speed``; while ``info["belief_status"]`` is "lost" it does not steer on the
     belief but stops and looks along the street axes (``look_rate``, ``look_dwell``).
-    "relocalizing", "doubtful" or "ambiguous" scale the speed by
-    ``slow_factor`` (for at most ``slow_steps`` steps at a stretch) (0.25: on tuning cities 13-14, robots pushed off their lane on the
-    particle belief touched a wall for 0.50 steps per episode against 0.83 at 0.5, 100
-    episodes, at 0.9 s more per goal; at 0 the agent stalled, 0.95 of the goals).
+    "relocalizing", "doubtful" or "ambiguous" scale the speed by ``slow_factor``, for at
+    most ``slow_steps`` steps at a stretch (0.25: on tuning cities 13-14, robots pushed off
+    their lane on the particle belief touched a wall for 0.50 steps per episode against 0.83
+    at 0.5, 100 episodes, at 0.9 s more per goal; at 0 the agent stalled, 0.95 of the goals).
     The status and the bumper come through ``info``, not the observation, so every pose
     source keeps the same observation space (and trained policies keep working).
     Call :meth:`reset` between episodes (a new goal also starts a new plan).

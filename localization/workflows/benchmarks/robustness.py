@@ -261,7 +261,7 @@ def task_path(task: RobustTask) -> Path:
             f"{task.seeds[-1]}_{task.config.image_size}px_{task.config.max_steps}"
             f"{_filter_marks(extra)}"
             f"{'_guard' if options.get('image_pose') and task.agent == 'scripted' else ''}"
-            f"{_slow_mark(task)}"
+            f"{_agent_marks(task)}"
             f"{_on_daylight(task)}.json")
     return Path(task.config.out_dir) / "robustness" / "episodes" / name
 
@@ -279,7 +279,7 @@ def _filter_marks(filter_options: dict[str, Any]) -> str:
     return marks
 
 
-def _slow_mark(task: RobustTask) -> str:
+def _agent_marks(task: RobustTask) -> str:
     """File-name marks of the scripted agent's bound on slow steps and its guard's patience
     (none: unbounded, never yields)."""
     if task.agent != "scripted":
