@@ -273,8 +273,8 @@ def test_slow_steps_go_to_the_scripted_agent_and_key_their_records() -> None:
 
 
 def test_guard_patience_is_set_per_belief_and_keys_the_records() -> None:
-    """The EKF rows' guard yields after 20 vetoes by default, the particle rows' never unless
-    asked (with an agreement radius); the true pose has no guard, so its records are the same."""
+    """By default the EKF rows' guard yields after 20 vetoes, the particle rows' after 20 to a
+    belief within 0.3 m of its image; the true pose has no guard, so its records are the same."""
     from localization.workflows.benchmarks.robustness import (
         RobustnessConfig,
         RobustTask,
@@ -283,19 +283,22 @@ def test_guard_patience_is_set_per_belief_and_keys_the_records() -> None:
     )
 
     city = gym.make("AppearanceNav-v0", scene_seed=0).unwrapped.city
-    default, never = RobustnessConfig(), RobustnessConfig(guard_patience=0)
+    default = RobustnessConfig()
+    never = RobustnessConfig(guard_patience=0, particle_guard_patience=0)
     assert make_agent(default, "scripted", "ekf", city).guard.patience == 20
+    assert make_agent(default, "scripted", "ekf", city).guard.agree is None
     assert make_agent(never, "scripted", "ekf", city).guard.patience is None
     guard = make_agent(default, "scripted", "particles", city).guard
-    assert guard.patience is None and guard.agree is None
-    agreeing = RobustnessConfig(particle_guard_patience=20, particle_guard_agree=0.3)
-    guard = make_agent(agreeing, "scripted", "particles", city).guard
     assert guard.patience == 20 and guard.agree == 0.3
+    assert make_agent(never, "scripted", "particles", city).guard.patience is None
+    agreeing = RobustnessConfig(particle_guard_agree=0.5)
+    assert make_agent(agreeing, "scripted", "particles", city).guard.agree == 0.5
 
     def name(config: RobustnessConfig, source: str) -> str:
         return task_path(RobustTask(config, 21, "push", source, "scripted", (1, 2))).name
 
     assert name(default, "ekf") == name(never, "ekf").replace(".json", "_yield20.json")
-    assert name(agreeing, "particles") == name(default, "particles").replace(
+    assert name(default, "particles") == name(never, "particles").replace(
         ".json", "_yield20-agree0.3.json")
+    assert name(agreeing, "particles").endswith("_yield20-agree0.5.json")
     assert name(default, "oracle") == name(never, "oracle") == name(agreeing, "oracle")
