@@ -274,7 +274,9 @@ def _check_robustness_bench(c: RobustnessConfig) -> None:
     check_numbers(c, positive=("episodes", "image_size", "n_train", "n_train_randomised",
                                "n_drive", "max_steps",
                                "kidnap_at", "workers"),
-                  non_negative=("seed", "motion_noise"), prefix="robustness_")
+                  non_negative=("seed", "motion_noise", "offset_doubt", "particle_offset_doubt",
+                                "slow_steps", "guard_patience", "particle_guard_patience",
+                                "particle_guard_agree"), prefix="robustness_")
     try:
         check_ray_address(c.ray_address)
     except (TypeError, ValueError) as err:

@@ -131,6 +131,15 @@ def test_a_free_daylight_localizer_has_its_own_file_and_a_checked_name() -> None
         check(Args(only="robustness", robustness=RobustnessConfig(daylight_lanes="route")))
 
 
+def test_the_cli_names_a_bad_belief_or_pilot_option_before_anything_runs() -> None:
+    for name, bad in (("offset_doubt", -0.4), ("particle_offset_doubt", float("nan")),
+                      ("slow_steps", -1), ("guard_patience", -20),
+                      ("particle_guard_patience", -1), ("particle_guard_agree", -0.3)):
+        option = "--robustness-" + name.replace("_", "-")
+        with pytest.raises(UsageError, match=option):
+            check(Args(only="robustness", robustness=RobustnessConfig(**{name: bad})))
+
+
 def test_the_report_names_rows_where_the_robot_was_flipped() -> None:
     upright = {"episodes": 200, "tipped_over_episodes": 0.0}
     assert tipped_over_note({"summary": {"scripted/ekf/traffic": upright}}) == ""
