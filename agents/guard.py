@@ -24,6 +24,14 @@ many consecutive vetoes the guard yields: it lets ``yield_steps`` forward comman
 yields only while the image pose lies within ``agree`` metres of the belief mean: a belief
 that agrees with its image planned around the wall it is passing, while a pushed belief a
 metre off, the case the guard is for, is still guarded.
+
+Near a wall psi* of single images alternates between a few decimetres off the truth and a metre
+or more off (tuning city 14, docs/benchmarks.md section 11, stop 76), so a guard that looks at
+the latest image only lets the robot move on the bad frames. With ``memory`` set, a command is
+also checked from each of the last ``memory`` steps' image poses, each carried forward to now
+by the known motion model F with the commands sent since (:meth:`ImageGuard.remember`: a fix a
+few steps old plus odometry); any of them can veto. A contact clears them (the robot did not
+move as commanded).
 """
 
 from __future__ import annotations
@@ -77,11 +85,15 @@ class ImageGuard:
     yield_steps : int — steps it then lets forward commands through (>= 1).
     agree : float or None — metres: yield only while the image pose lies this close to the
         belief mean (> 0); None: whatever the belief.
+    memory : int — earlier steps' image poses also checked, carried forward by F (>= 0; 0:
+        the latest image only).
+    dt : float — seconds per step, to carry them forward (the env's ``dt``, > 0).
     """
 
     def __init__(self, city: Any, horizon: float = GUARD_HORIZON, margin: float = GUARD_MARGIN,
                  radius: float = GUARD_RADIUS, n_points: int = 5, patience: int | None = None,
-                 yield_steps: int = 10, agree: float | None = None) -> None:
+                 yield_steps: int = 10, agree: float | None = None, memory: int = 0,
+                 dt: float = 0.1) -> None:
         self.city = city
         self.horizon = check_real(horizon, "horizon", low=0.0, low_open=True)
         self.margin = check_real(margin, "margin", low=0.0)
@@ -91,26 +103,48 @@ class ImageGuard:
         self.yield_steps = check_int(yield_steps, "yield_steps", low=1)
         self.agree = None if agree is None else check_real(agree, "agree", low=0.0,
                                                            low_open=True)
+        self.memory = check_int(memory, "memory", low=0)
+        self.F = UnicycleModel(check_real(dt, "dt", low=0.0, low_open=True))
         self.vetoes = 0
         self.reset()
 
     def reset(self) -> None:
-        """Forget the run of vetoes and any yield (call between episodes)."""
+        """Forget the run of vetoes, any yield and the remembered image poses (call between
+        episodes)."""
         self._run = 0  # consecutive vetoes
         self._yielding = 0  # steps of yielding left
+        self._poses: list[Array | None] = []  # earlier image poses carried to now, oldest first
 
     def blocks(self, u: Array, mean: Array, info: Mapping[str, Any] | None) -> bool:
         """Whether the forward command ``u`` (2,) should not be driven, from the belief mean
-        (3,) and the step's ``info`` (its ``image_pose``; no veto without one)."""
+        (3,) and the step's ``info`` (its ``image_pose``; no veto without one), or from a
+        remembered image pose (``memory``)."""
         if info is None or u[0] <= 0:
             return False
         if "image_pose" not in info:
             raise KeyError("the image guard needs info['image_pose']: wrap the env in "
                            "BeliefWrapper(..., image_pose=True)")
-        pose = info["image_pose"]
-        pose = np.asarray(pose, dtype=np.float64)
-        if pose.shape != (3,) or not np.all(np.isfinite(pose)) \
-                or np.hypot(*(pose[:2] - mean[:2])) > self.radius:
+        poses = [_image_pose(info), *self._poses]
+        return any(self._blocks_from(pose, u, mean) for pose in poses if pose is not None)
+
+    def remember(self, u: Array, info: Mapping[str, Any] | None) -> None:
+        """After the command ``u`` (2,) is sent (whoever chose it): keep this step's image
+        pose among the last ``memory`` and carry each one step forward by F; a contact
+        (``info["collision"]``) or a step without ``info`` forgets them."""
+        if self.memory == 0:
+            return
+        if info is None or info.get("collision"):
+            self._poses = []
+            return
+        u = np.asarray(u, dtype=np.float64)
+        poses = [*self._poses, _image_pose(info)][-self.memory:]
+        self._poses = [None if p is None else self.F.predict(p, u) for p in poses]
+
+    def _blocks_from(self, pose: Array, u: Array, mean: Array) -> bool:
+        """Whether ``u`` held for ``horizon`` from the image pose ``pose`` (3,) runs the disc
+        into a building where its clearance is short (an image pose far from the belief
+        ``mean`` or inside a building: no)."""
+        if np.hypot(*(pose[:2] - mean[:2])) > self.radius:
             return False
         start = float(self.city.clearance(pose[None, :2])[0])
         if start < 0:
@@ -135,9 +169,18 @@ class ImageGuard:
         return u
 
     def _agrees(self, mean: Array, info: Mapping[str, Any]) -> bool:
-        """Whether the image pose lies within ``agree`` of the belief mean (True without
-        ``agree``; only called on a veto, so the image pose is there and finite)."""
+        """Whether the latest image pose lies within ``agree`` of the belief mean (True
+        without ``agree``; False without a usable image pose: a veto from memory alone)."""
         if self.agree is None:
             return True
-        pose = np.asarray(info["image_pose"], dtype=np.float64)
-        return bool(np.hypot(*(pose[:2] - mean[:2])) <= self.agree)
+        pose = _image_pose(info)
+        return pose is not None and bool(np.hypot(*(pose[:2] - mean[:2])) <= self.agree)
+
+
+def _image_pose(info: Mapping[str, Any]) -> Array | None:
+    """``info["image_pose"]`` as a finite pose (3,), or None (missing, NaN, malformed)."""
+    pose = info.get("image_pose")
+    if pose is None:
+        return None
+    pose = np.asarray(pose, dtype=np.float64)
+    return pose if pose.shape == (3,) and np.all(np.isfinite(pose)) else None

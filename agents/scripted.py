@@ -168,6 +168,8 @@ class ScriptedAgent:
         it lets forward commands through for a while (None: it never yields).
     guard_agree : float or None — the guard's ``agree``: it yields only while the image pose
         lies this close (m) to the belief (None: whatever the belief).
+    guard_memory : int — the guard's ``memory``: earlier steps' image poses, carried forward
+        by the motion model with every command the agent sent, also veto (0: the latest only).
 
     Notes
     -----
@@ -192,15 +194,16 @@ class ScriptedAgent:
                  look_rate: float = 0.5, slow_factor: float = 0.25, plan: str = "drive",
                  back_off_steps: int = 5, back_off_speed: float = 0.3,
                  look_dwell: int = 10, guard: bool = False, slow_steps: int | None = None,
-                 guard_patience: int | None = None, guard_agree: float | None = None) -> None:
+                 guard_patience: int | None = None, guard_agree: float | None = None,
+                 guard_memory: int = 0) -> None:
         self.navigator = Navigator(city, replan_distance, plan)
         self.slow_steps = None if slow_steps is None else check_int(slow_steps, "slow_steps",
                                                                     low=1)
         self._slow_run = 0
         self.recovery = Recovery(w_max, back_off_steps, back_off_speed, look_rate, look_dwell)
         self.slow_factor = check_real(slow_factor, "slow_factor", low=0.0, high=1.0)
-        self.guard = (ImageGuard(city, patience=guard_patience, agree=guard_agree)
-                      if check_bool(guard, "guard") else None)
+        self.guard = (ImageGuard(city, patience=guard_patience, agree=guard_agree,
+                                 memory=guard_memory) if check_bool(guard, "guard") else None)
         self.lookahead, self.speed, self.w_max, self.turn_in_place = (
             check_real(v, name, low=0.0, low_open=True) for name, v in (
                 ("lookahead", lookahead), ("speed", speed), ("w_max", w_max),
@@ -224,6 +227,14 @@ class ScriptedAgent:
             ) -> NDArray[np.float32]:
         """The action U = [v, w] for one belief observation (and the step's ``info``)."""
         mean, _, goal = check_belief_observation(obs)
+        u = self._command(mean, goal, info)
+        if self.guard is not None:
+            self.guard.remember(u, info)
+        return u
+
+    def _command(self, mean: Array, goal: Array, info: Mapping[str, Any] | None
+                 ) -> NDArray[np.float32]:
+        """The recovery's command, or pure pursuit along the plan (slowed, guarded)."""
         slow = self._slow(info)
         u_recover = self.recovery.act(float(mean[2]), info)
         if u_recover is not None:

@@ -275,8 +275,10 @@ def _check_robustness_bench(c: RobustnessConfig) -> None:
                                "n_drive", "max_steps",
                                "kidnap_at", "workers"),
                   non_negative=("seed", "motion_noise", "offset_doubt", "particle_offset_doubt",
-                                "slow_steps", "guard_patience", "particle_guard_patience",
-                                "particle_guard_agree"), prefix="robustness_")
+                                "slow_steps", "guard_patience", "guard_agree",
+                                "guard_memory", "particle_guard_patience",
+                                "particle_guard_agree", "particle_guard_memory"),
+                  prefix="robustness_")
     try:
         check_ray_address(c.ray_address)
     except (TypeError, ValueError) as err:

@@ -127,6 +127,67 @@ def test_scripted_agent_passes_its_patience_to_the_guard(city, facing_wall):
     assert agent.act(belief, info)[0] == 0.0
 
 
+def test_memory_vetoes_from_a_recent_image_pose_carried_forward(city, facing_wall):
+    """``memory=3``: an image pose at the wall, then images that alias 1.3 m away: the
+    remembered pose (carried forward by the commands sent: turning on the spot keeps it in
+    place) still vetoes for three steps, then it is forgotten; without memory the first
+    aliased image lets the robot drive. A contact forgets them once its step is sent."""
+    u, stop = np.array([0.9, 0.0]), np.array([0.0, 0.0])
+    aliased = {"image_pose": facing_wall + [0.0, 1.3, np.pi]}  # faces away from the wall
+
+    def run(guard: ImageGuard, later: list[dict]) -> list[float]:
+        assert guard.blocks(u, facing_wall, {"image_pose": facing_wall})
+        guard.remember(stop, {"image_pose": facing_wall})
+        out = []
+        for info in later:
+            v = float(guard.filter(u, facing_wall, info)[0])
+            guard.remember(np.array([v, 0.0]), info)
+            out.append(v)
+        return out
+
+    assert run(ImageGuard(city), [aliased] * 5) == [0.9] * 5
+    assert run(ImageGuard(city, memory=3), [aliased] * 5) == [0.0, 0.0, 0.0, 0.9, 0.9]
+    nan = {"image_pose": np.full(3, np.nan)}  # images without a pose keep their slot
+    assert run(ImageGuard(city, memory=3), [nan] * 4) == [0.0, 0.0, 0.0, 0.9]
+    bumped = {**aliased, "collision": True}
+    assert run(ImageGuard(city, memory=3), [bumped, aliased]) == [0.0, 0.9]  # then forgets
+    guard = ImageGuard(city, memory=3)
+    run(guard, [])
+    guard.reset()
+    assert not guard.blocks(u, facing_wall, aliased)
+
+
+def test_memory_carries_poses_by_the_motion_model(city, facing_wall):
+    """A pose remembered while the robot backed off 0.3 m/s for 4 steps of 0.1 s lies
+    0.12 m farther from the wall, as F says."""
+    guard = ImageGuard(city, memory=5, dt=0.1)
+    info = {"image_pose": facing_wall}
+    guard.remember(np.array([-0.3, 0.0]), info)
+    for _ in range(3):
+        guard.remember(np.array([-0.3, 0.0]), {"image_pose": None})
+    np.testing.assert_allclose(guard._poses[0], facing_wall - [0.12, 0.0, 0.0], atol=1e-12)
+    assert [p is None for p in guard._poses] == [False, True, True, True]
+
+
+def test_scripted_agent_remembers_every_command_it_sends(city, facing_wall):
+    """The agent hands every command to the guard's memory, a back-off too, and passes
+    ``guard_memory`` on; memory 0 remembers nothing."""
+    belief = {"pose_mean": facing_wall + [0.0, 0.0, np.pi], "pose_cov": np.ones(6) * 0.01,
+              "goal": facing_wall[:2] + [-6.0, 0.0]}
+    agent = ScriptedAgent(city, guard=True, guard_memory=2)
+    assert agent.guard.memory == 2 and ScriptedAgent(city, guard=True).guard.memory == 0
+    agent.act(belief, {"belief_status": "tracking", "image_pose": facing_wall})
+    assert len(agent.guard._poses) == 1
+    u = agent.act(belief, {"belief_status": "tracking", "image_pose": facing_wall,
+                           "collision": True})  # a contact: the agent backs off
+    assert u[0] < 0 and agent.guard._poses == []
+    for bad in (-1, 1.5):
+        with pytest.raises((TypeError, ValueError), match="memory"):
+            ImageGuard(city, memory=bad)
+    with pytest.raises(ValueError, match="dt"):
+        ImageGuard(city, dt=0.0)
+
+
 def test_bad_settings(city):
     with pytest.raises(TypeError, match="guard must be True or False"):
         ScriptedAgent(city, guard="yes")

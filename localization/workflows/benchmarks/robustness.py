@@ -217,21 +217,23 @@ def belief_options(args: RobustnessConfig, source: str, condition: str = "nomina
 def make_agent(args: RobustnessConfig, agent: str, source: str, city: Any) -> Any:
     """The scripted navigator, or the PPO policy trained on the row's kind of pose."""
     if agent == "scripted":
-        patience, agree = guard_settings(args, source)
+        patience, agree, memory = guard_settings(args, source)
         return ScriptedAgent(city, guard=args.guard and source in FILTERS,
                              slow_steps=args.slow_steps or None, guard_patience=patience,
-                             guard_agree=agree)
+                             guard_agree=agree, guard_memory=memory)
     from agents.ppo import PPOAgent
 
     return PPOAgent.load(policy_path(args, source), city)
 
 
-def guard_settings(args: RobustnessConfig, source: str) -> tuple[int | None, float | None]:
-    """The scripted agent's guard patience and agreement radius on a row's pose source
-    (None: never yields, whatever the belief)."""
+def guard_settings(args: RobustnessConfig, source: str
+                   ) -> tuple[int | None, float | None, int]:
+    """The scripted agent's guard patience, agreement radius and memory on a row's pose
+    source (None: never yields, whatever the belief; 0: the latest image only)."""
     if source == "particles":
-        return args.particle_guard_patience or None, args.particle_guard_agree or None
-    return args.guard_patience or None, None
+        return (args.particle_guard_patience or None, args.particle_guard_agree or None,
+                args.particle_guard_memory)
+    return args.guard_patience or None, args.guard_agree or None, args.guard_memory
 
 
 def policy_path(args: RobustnessConfig, source: str) -> Path:
@@ -280,15 +282,17 @@ def _filter_marks(filter_options: dict[str, Any]) -> str:
 
 
 def _agent_marks(task: RobustTask) -> str:
-    """File-name marks of the scripted agent's bound on slow steps and its guard's patience
-    (none: unbounded, never yields)."""
+    """File-name marks of the scripted agent's bound on slow steps, its guard's patience
+    and memory (none: unbounded, never yields, the latest image only)."""
     if task.agent != "scripted":
         return ""
     steps = task.config.slow_steps
-    patience, agree = guard_settings(task.config, task.source)
-    guarded = task.config.guard and task.source in FILTERS and patience is not None
-    return ((f"_slow{steps}" if steps else "") + (f"_yield{patience}" if guarded else "")
-            + (f"-agree{agree:g}" if guarded and agree is not None else ""))
+    patience, agree, memory = guard_settings(task.config, task.source)
+    guarded = task.config.guard and task.source in FILTERS
+    yields = guarded and patience is not None
+    return ((f"_slow{steps}" if steps else "") + (f"_yield{patience}" if yields else "")
+            + (f"-agree{agree:g}" if yields and agree is not None else "")
+            + (f"_memory{memory}" if guarded and memory else ""))
 
 
 def _on_daylight(task: RobustTask) -> str:

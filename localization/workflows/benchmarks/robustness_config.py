@@ -125,6 +125,13 @@ class RobustnessConfig:
                 "a corner stood 520 steps on tuning city 13); 0: it never yields. 20 since "
                 "stop 75 (tuning 13-14 and held out 21-22: success and contact steps as "
                 "without it, pushed goals reached sooner; docs/benchmarks.md section 11)"})
+    guard_agree: float = field(default=0.0, metadata={
+        "help": "m: the EKF rows' guard yields only while the image pose lies this close to "
+                "the belief (ImageGuard(agree=...)); 0: whatever the belief"})
+    guard_memory: int = field(default=0, metadata={
+        "help": "the EKF rows' guard also checks each command from the image poses of this "
+                "many earlier steps, carried forward by the motion model (ImageGuard(memory="
+                "...)); 0: the latest image only"})
     particle_guard_patience: int = field(default=20, metadata={
         "help": "the same for the particle rows' guard (0: it never yields). 20 alone failed "
                 "its rule on tuning cities 13-14 (pushed contact steps 0.080 -> 0.120); with "
@@ -135,6 +142,8 @@ class RobustnessConfig:
         "help": "m: the particle rows' guard yields only while the image pose lies this close "
                 "to the belief (ImageGuard(agree=...)); 0: whatever the belief. 0.3 since "
                 "stop 75 (fixed before its runs: a pushed belief 1.2-1.5 m off stays guarded)"})
+    particle_guard_memory: int = field(default=0, metadata={
+        "help": "the same for the particle rows' guard (0: the latest image only)"})
     particle_unmapped: str = field(default="floor", metadata={
         "help": "what the particle rows' particles get where the maps are undefined "
                 "(ParticleFilter(unmapped=...)): floor (the gate's, as an outlier) or typical "
@@ -175,11 +184,13 @@ class RobustnessConfig:
         if self.particle_unmapped not in UNMAPPED:
             raise ValueError(f"robustness particle_unmapped must be one of {UNMAPPED}, got "
                              f"{self.particle_unmapped!r}")
-        for name in ("offset_doubt", "particle_offset_doubt", "particle_guard_agree"):
+        for name in ("offset_doubt", "particle_offset_doubt", "guard_agree",
+                     "particle_guard_agree"):
             if not getattr(self, name) >= 0:  # NaN too
                 raise ValueError(f"robustness {name} must be >= 0 (0: off), got "
                                  f"{getattr(self, name)!r}")
-        for name in ("slow_steps", "guard_patience", "particle_guard_patience"):
+        for name in ("slow_steps", "guard_patience", "particle_guard_patience",
+                     "guard_memory", "particle_guard_memory"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ValueError(f"robustness {name} must be an integer >= 0 (0: off), got "

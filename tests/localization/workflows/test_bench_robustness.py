@@ -134,7 +134,9 @@ def test_a_free_daylight_localizer_has_its_own_file_and_a_checked_name() -> None
 def test_the_cli_names_a_bad_belief_or_pilot_option_before_anything_runs() -> None:
     for name, bad in (("offset_doubt", -0.4), ("particle_offset_doubt", float("nan")),
                       ("slow_steps", -1), ("guard_patience", -20),
-                      ("particle_guard_patience", -1), ("particle_guard_agree", -0.3)):
+                      ("guard_agree", -0.3), ("guard_memory", -5),
+                      ("particle_guard_patience", -1), ("particle_guard_agree", -0.3),
+                      ("particle_guard_memory", -1)):
         option = "--robustness-" + name.replace("_", "-")
         with pytest.raises(UsageError, match=option):
             check(Args(only="robustness", robustness=RobustnessConfig(**{name: bad})))
@@ -310,4 +312,20 @@ def test_guard_patience_is_set_per_belief_and_keys_the_records() -> None:
     assert name(default, "particles") == name(never, "particles").replace(
         ".json", "_yield20-agree0.3.json")
     assert name(agreeing, "particles").endswith("_yield20-agree0.5.json")
+    ekf_agreeing = RobustnessConfig(guard_agree=0.3)
+    assert make_agent(ekf_agreeing, "scripted", "ekf", city).guard.agree == 0.3
+    assert name(ekf_agreeing, "ekf").endswith("_yield20-agree0.3.json")
+    with pytest.raises(ValueError, match="guard_agree"):
+        RobustnessConfig(guard_agree=-1.0).lists()
+    remembering = RobustnessConfig(guard_memory=5, particle_guard_memory=3)
+    assert make_agent(remembering, "scripted", "ekf", city).guard.memory == 5
+    assert make_agent(remembering, "scripted", "particles", city).guard.memory == 3
+    assert make_agent(default, "scripted", "ekf", city).guard.memory == 0
+    assert name(remembering, "ekf").endswith("_yield20_memory5.json")
+    assert name(remembering, "particles").endswith("_yield20-agree0.3_memory3.json")
+    assert name(RobustnessConfig(guard_patience=0, guard_memory=5), "ekf").endswith(
+        "_memory5.json")
+    assert name(remembering, "oracle") == name(default, "oracle")
+    with pytest.raises(ValueError, match="particle_guard_memory"):
+        RobustnessConfig(particle_guard_memory=1.5).lists()
     assert name(default, "oracle") == name(never, "oracle") == name(agreeing, "oracle")
