@@ -41,6 +41,7 @@ from numpy.typing import ArrayLike
 
 from localization._validation import check_bool, check_choice, check_options, check_seed
 from localization.districts import DistrictLocalizer
+from localization.familiarity import Familiarity
 from localization.filtering.belief import BeliefFilter
 from localization.filtering.ekf import PoseEKF, check_gate_probability
 from localization.filtering.free_space import city_sampler
@@ -49,6 +50,7 @@ from localization.filtering.particles import ParticleBelief
 from localization.filtering.process_noise import world_process_noise
 from localization.geometry import Array, cov_to_triu, wrap_angle
 from localization.localizer import MEASUREMENTS, AppearanceLocalizer, city_info
+from localization.wrapper_checks import check_compatible, single_map
 from localization.wrapper_render import RenderBelief
 
 FILTERS = ("ekf", "particles")
@@ -180,6 +182,10 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         :class:`~localization.localizer.OtherCityError`: the maps would alias silently).
     image_pose : bool
         Publish ``info["image_pose"]``, psi* of each image (for ``agents.ImageGuard``).
+    familiar_novelty : float or None
+        Report "doubtful" instead of "tracking" while the median relative novelty of the
+        last 10 images exceeds this (:mod:`localization.familiarity`: images unlike the
+        map's, e.g. another city's map); ``info["novelty"]`` gets each image's. None: off.
     filter_options : dict, optional
         More settings of the filter (``FILTER_OPTIONS[filter]``): for "ekf"
         ``detect_divergence`` (True: the EKF notices when it is lost and restarts where
@@ -216,7 +222,8 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
                  gate_probability: float | None = 0.997, relocalize_after: int | None = 50,
                  inflate_after: int | None = 3, filter: str = "ekf",
                  filter_options: dict[str, Any] | None = None,
-                 allow_other_city: bool = False, image_pose: bool = False) -> None:
+                 allow_other_city: bool = False, image_pose: bool = False,
+                 familiar_novelty: float | None = None) -> None:
         # the spec refers to the localizer, as a scikit-learn meta-estimator does: Gymnasium's
         # deep copies duplicated it in every wrapper (1.1 GB a wrapper of a 60 m map); the
         # options dict is copied, its values (a free-space mask of the city, ...) are not
@@ -225,7 +232,8 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
             gate_probability=gate_probability, relocalize_after=relocalize_after,
             inflate_after=inflate_after, filter=filter, filter_options=dict(filter_options)
             if isinstance(filter_options, Mapping) else filter_options,
-            allow_other_city=allow_other_city, image_pose=image_pose, _disable_deepcopy=True)
+            allow_other_city=allow_other_city, image_pose=image_pose,
+            familiar_novelty=familiar_novelty, _disable_deepcopy=True)
         self._saved_kwargs = _SharedKwargs(self._saved_kwargs)
         check_choice(measurement, "measurement", MEASUREMENTS)
         check_choice(filter, "filter", FILTERS)
@@ -233,11 +241,13 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
                                 FILTER_OPTIONS[filter])
         gate_probability = check_gate_probability(gate_probability)
         _PoseObservation.__init__(self, env, keep_image)
-        self._check_compatible(env, localizer)
+        check_compatible(env, localizer)
         localizer.check_city(city_info(env), allow_other_city=check_bool(
             allow_other_city, "allow_other_city"))
         self.localizer = localizer
         self.image_pose = check_bool(image_pose, "image_pose")
+        self.familiarity = None if familiar_novelty is None else Familiarity(
+            single_map(localizer, "familiar_novelty").regressor_, familiar_novelty)
         self.measurement = measurement
         self.filter = filter
         mm = env.unwrapped.motion_model
@@ -261,22 +271,6 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         self.belief_status = "tracking"
         self._localize = "image"
 
-    @staticmethod
-    def _check_compatible(env: gym.Env, localizer: AppearanceLocalizer | DistrictLocalizer
-                          ) -> None:
-        if not isinstance(localizer, (AppearanceLocalizer, DistrictLocalizer)):
-            raise TypeError("localizer must be a fitted AppearanceLocalizer or "
-                            f"DistrictLocalizer, got {type(localizer).__name__}")
-        localizer.check_ready()
-        image_shape = tuple(env.observation_space["image"].shape[:2])
-        if image_shape != tuple(localizer.image_size_):
-            raise ValueError(f"the localizer was fitted on {tuple(localizer.image_size_)} "
-                             f"images but the env renders {image_shape}")
-        camera = getattr(env.unwrapped, "camera_name", None)
-        if localizer.camera_ is not None and camera is not None and camera != localizer.camera_:
-            raise ValueError(f"the localizer was fitted for camera {localizer.camera_!r} "
-                             f"but the env uses {camera!r}")
-
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None,
               ) -> tuple[dict[str, Any], dict[str, Any]]:
         """Reset the env and start the belief from the first image (see the class Notes).
@@ -293,6 +287,8 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
         if isinstance(self.belief, ParticleBelief) and seed is not None and not self._seeded:
             self.belief.rng = np.random.default_rng([seed, 0x5EED])
         status = self.belief.reset(w, mode=localize)
+        if self.familiarity is not None:
+            self.familiarity.reset()
         self._publish(info, np.nan, status, w)
         return self.observation(obs), info
 
@@ -333,6 +329,9 @@ class BeliefWrapper(_PoseObservation, gym.utils.RecordConstructorArgs):
                 self.localizer, DistrictLocalizer) else self.localizer
             info["image_pose"] = maps.measure(w, "pose")
         self.belief_status = self.belief.belief_status
+        if self.familiarity is not None:
+            info["novelty"] = self.familiarity.update(w)
+            self.belief_status = self.familiarity.status(self.belief_status)
         info["nis"] = float(nis)
         info["nis_dof"] = self._dof
         info["measurement_status"] = status

@@ -277,7 +277,8 @@ def _check_robustness_bench(c: RobustnessConfig) -> None:
                   non_negative=("seed", "motion_noise", "offset_doubt", "particle_offset_doubt",
                                 "slow_steps", "guard_patience", "guard_agree",
                                 "guard_memory", "particle_guard_patience",
-                                "particle_guard_agree", "particle_guard_memory"),
+                                "particle_guard_agree", "particle_guard_memory",
+                                "familiar_novelty"),
                   prefix="robustness_")
     try:
         check_ray_address(c.ray_address)

@@ -200,6 +200,8 @@ def belief_options(args: RobustnessConfig, source: str, condition: str = "nomina
     options: dict[str, Any] = {"filter": FILTERS[source], "image_pose": args.guard}
     one_map = (training_of(condition, args.moving_localizer) == "daylight"
                or args.randomised_map != "experiences")
+    if args.familiar_novelty > 0 and one_map:
+        options["familiar_novelty"] = args.familiar_novelty
     if source == "ekf" and args.detect_divergence and one_map:
         detect = {"offset_doubt": args.offset_doubt} if args.offset_doubt > 0 else True
         options["filter_options"] = {"detect_divergence": detect}
@@ -262,10 +264,16 @@ def task_path(task: RobustTask) -> Path:
     name = (f"{task.agent}_{task.source}_{task.condition}_{task.city}_{task.seeds[0]}-"
             f"{task.seeds[-1]}_{task.config.image_size}px_{task.config.max_steps}"
             f"{_filter_marks(extra)}"
+            f"{_familiar_mark(options)}"
             f"{'_guard' if options.get('image_pose') and task.agent == 'scripted' else ''}"
             f"{_agent_marks(task)}"
             f"{_on_daylight(task)}.json")
     return Path(task.config.out_dir) / "robustness" / "episodes" / name
+
+
+def _familiar_mark(options: dict[str, Any]) -> str:
+    """A file-name mark of a row whose belief reports unfamiliar images as doubtful."""
+    return f"_familiar{options['familiar_novelty']:g}" if "familiar_novelty" in options else ""
 
 
 def _filter_marks(filter_options: dict[str, Any]) -> str:

@@ -144,6 +144,10 @@ class RobustnessConfig:
                 "stop 75 (fixed before its runs: a pushed belief 1.2-1.5 m off stays guarded)"})
     particle_guard_memory: int = field(default=0, metadata={
         "help": "the same for the particle rows' guard (0: the latest image only)"})
+    familiar_novelty: float = field(default=0.0, metadata={
+        "help": "the belief rows report 'doubtful' instead of 'tracking' while the median "
+                "relative novelty of the last 10 images exceeds this (BeliefWrapper("
+                "familiar_novelty=...), one-map localizers); 0: off"})
     particle_unmapped: str = field(default="floor", metadata={
         "help": "what the particle rows' particles get where the maps are undefined "
                 "(ParticleFilter(unmapped=...)): floor (the gate's, as an outlier) or typical "
@@ -185,7 +189,7 @@ class RobustnessConfig:
             raise ValueError(f"robustness particle_unmapped must be one of {UNMAPPED}, got "
                              f"{self.particle_unmapped!r}")
         for name in ("offset_doubt", "particle_offset_doubt", "guard_agree",
-                     "particle_guard_agree"):
+                     "particle_guard_agree", "familiar_novelty"):
             if not getattr(self, name) >= 0:  # NaN too
                 raise ValueError(f"robustness {name} must be >= 0 (0: off), got "
                                  f"{getattr(self, name)!r}")

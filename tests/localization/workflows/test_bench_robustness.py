@@ -136,7 +136,7 @@ def test_the_cli_names_a_bad_belief_or_pilot_option_before_anything_runs() -> No
                       ("slow_steps", -1), ("guard_patience", -20),
                       ("guard_agree", -0.3), ("guard_memory", -5),
                       ("particle_guard_patience", -1), ("particle_guard_agree", -0.3),
-                      ("particle_guard_memory", -1)):
+                      ("particle_guard_memory", -1), ("familiar_novelty", -5.0)):
         option = "--robustness-" + name.replace("_", "-")
         with pytest.raises(UsageError, match=option):
             check(Args(only="robustness", robustness=RobustnessConfig(**{name: bad})))
@@ -329,3 +329,27 @@ def test_guard_patience_is_set_per_belief_and_keys_the_records() -> None:
     with pytest.raises(ValueError, match="particle_guard_memory"):
         RobustnessConfig(particle_guard_memory=1.5).lists()
     assert name(default, "oracle") == name(never, "oracle") == name(agreeing, "oracle")
+
+
+def test_familiar_novelty_reaches_the_belief_rows_and_keys_their_records() -> None:
+    from localization.workflows.benchmarks.robustness import (
+        RobustnessConfig,
+        RobustTask,
+        belief_options,
+        task_path,
+    )
+
+    familiar, plain = RobustnessConfig(familiar_novelty=5.0), RobustnessConfig()
+    for source in ("ekf", "particles"):
+        assert belief_options(familiar, source)["familiar_novelty"] == 5.0
+        assert "familiar_novelty" not in belief_options(plain, source)
+    assert belief_options(familiar, "oracle") == {}
+
+    def name(config: RobustnessConfig, source: str) -> str:
+        return task_path(RobustTask(config, 21, "nominal", source, "scripted", (1, 2))).name
+
+    assert name(familiar, "ekf") == name(plain, "ekf").replace("_detect", "_detect_familiar5")
+    assert "_familiar5" in name(familiar, "particles")
+    assert name(familiar, "oracle") == name(plain, "oracle")
+    with pytest.raises(ValueError, match="familiar_novelty"):
+        RobustnessConfig(familiar_novelty=float("nan")).lists()
