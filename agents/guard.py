@@ -31,7 +31,9 @@ the latest image only lets the robot move on the bad frames. With ``memory`` set
 also checked from each of the last ``memory`` steps' image poses, each carried forward to now
 by the known motion model F with the commands sent since (:meth:`ImageGuard.remember`: a fix a
 few steps old plus odometry); any of them can veto. A contact clears them (the robot did not
-move as commanded).
+move as commanded). It is an option, off in the robustness rows: with ``memory=5`` the EKF
+rows' pushed contacts fell on tuning cities 13-14 and rose held out (0.065 -> 0.150 contact
+steps per episode), as the robot waited longer next to the wall it then scraped.
 """
 
 from __future__ import annotations

@@ -278,7 +278,7 @@ def _check_robustness_bench(c: RobustnessConfig) -> None:
                                 "slow_steps", "guard_patience", "guard_agree",
                                 "guard_memory", "particle_guard_patience",
                                 "particle_guard_agree", "particle_guard_memory",
-                                "familiar_novelty"),
+                                "familiar_novelty", "particle_familiar_novelty"),
                   prefix="robustness_")
     try:
         check_ray_address(c.ray_address)

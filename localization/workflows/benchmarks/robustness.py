@@ -200,8 +200,9 @@ def belief_options(args: RobustnessConfig, source: str, condition: str = "nomina
     options: dict[str, Any] = {"filter": FILTERS[source], "image_pose": args.guard}
     one_map = (training_of(condition, args.moving_localizer) == "daylight"
                or args.randomised_map != "experiences")
-    if args.familiar_novelty > 0 and one_map:
-        options["familiar_novelty"] = args.familiar_novelty
+    familiar = args.particle_familiar_novelty if source == "particles" else args.familiar_novelty
+    if familiar > 0 and one_map:
+        options["familiar_novelty"] = familiar
     if source == "ekf" and args.detect_divergence and one_map:
         detect = {"offset_doubt": args.offset_doubt} if args.offset_doubt > 0 else True
         options["filter_options"] = {"detect_divergence": detect}

@@ -144,10 +144,14 @@ class RobustnessConfig:
                 "stop 75 (fixed before its runs: a pushed belief 1.2-1.5 m off stays guarded)"})
     particle_guard_memory: int = field(default=0, metadata={
         "help": "the same for the particle rows' guard (0: the latest image only)"})
-    familiar_novelty: float = field(default=0.0, metadata={
-        "help": "the belief rows report 'doubtful' instead of 'tracking' while the median "
+    familiar_novelty: float = field(default=5.0, metadata={
+        "help": "the EKF rows report 'doubtful' instead of 'tracking' while the median "
                 "relative novelty of the last 10 images exceeds this (BeliefWrapper("
-                "familiar_novelty=...), one-map localizers); 0: off"})
+                "familiar_novelty=...), one-map localizers); 0: off. 5 since stop 76 (held "
+                "out 21-22: success and contact steps as without it, misled steps -4 %)"})
+    particle_familiar_novelty: float = field(default=0.0, metadata={
+        "help": "the same for the particle rows (0: off; 5 failed on tuning cities 13-14, "
+                "pushed contact steps 0.080 -> 0.175)"})
     particle_unmapped: str = field(default="floor", metadata={
         "help": "what the particle rows' particles get where the maps are undefined "
                 "(ParticleFilter(unmapped=...)): floor (the gate's, as an outlier) or typical "
@@ -189,7 +193,8 @@ class RobustnessConfig:
             raise ValueError(f"robustness particle_unmapped must be one of {UNMAPPED}, got "
                              f"{self.particle_unmapped!r}")
         for name in ("offset_doubt", "particle_offset_doubt", "guard_agree",
-                     "particle_guard_agree", "familiar_novelty"):
+                     "particle_guard_agree", "familiar_novelty",
+                     "particle_familiar_novelty"):
             if not getattr(self, name) >= 0:  # NaN too
                 raise ValueError(f"robustness {name} must be >= 0 (0: off), got "
                                  f"{getattr(self, name)!r}")

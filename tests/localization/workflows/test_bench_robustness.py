@@ -136,7 +136,8 @@ def test_the_cli_names_a_bad_belief_or_pilot_option_before_anything_runs() -> No
                       ("slow_steps", -1), ("guard_patience", -20),
                       ("guard_agree", -0.3), ("guard_memory", -5),
                       ("particle_guard_patience", -1), ("particle_guard_agree", -0.3),
-                      ("particle_guard_memory", -1), ("familiar_novelty", -5.0)):
+                      ("particle_guard_memory", -1), ("familiar_novelty", -5.0),
+                      ("particle_familiar_novelty", -1.0)):
         option = "--robustness-" + name.replace("_", "-")
         with pytest.raises(UsageError, match=option):
             check(Args(only="robustness", robustness=RobustnessConfig(**{name: bad})))
@@ -202,8 +203,8 @@ def test_detect_divergence_applies_to_the_ekf_rows_and_keys_their_records() -> N
         task_path,
     )
 
-    plain = RobustnessConfig(detect_divergence=False, guard=False)
-    detect = RobustnessConfig(guard=False)
+    plain = RobustnessConfig(detect_divergence=False, guard=False, familiar_novelty=0.0)
+    detect = RobustnessConfig(guard=False, familiar_novelty=0.0)
     assert belief_options(plain, "ekf") == {"filter": "ekf", "image_pose": False}
     # the scripted agent's guard reads psi* of each image: the belief publishes it then only
     assert belief_options(RobustnessConfig(), "particles")["image_pose"] is True
@@ -218,7 +219,7 @@ def test_detect_divergence_applies_to_the_ekf_rows_and_keys_their_records() -> N
     names = {task_path(RobustTask(config, 21, "nominal", source, "scripted", (1, 2))).name
              for config in (plain, detect) for source in ("ekf", "particles")}
     assert len(names) == 3  # the particle rows' records are the same either way
-    typical = RobustnessConfig(guard=False, particle_unmapped="typical")
+    typical = RobustnessConfig(guard=False, particle_unmapped="typical", familiar_novelty=0.0)
     assert belief_options(typical, "particles") == {
         "filter": "particles", "image_pose": False, "filter_options": {"unmapped": "typical"}}
     assert belief_options(typical, "ekf") == belief_options(detect, "ekf")
@@ -247,7 +248,8 @@ def test_the_offset_doubt_goes_to_the_ekf_monitor_and_keys_its_records() -> None
         RobustnessConfig(guard=False, offset_doubt=0.5, detect_divergence=False), "ekf")
     names = [task_path(RobustTask(c, 21, "push", "ekf", "scripted", (1, 2))).name
              for c in (RobustnessConfig(guard=False), offset)]
-    assert names[0].endswith("_detect.json") and names[1].endswith("_detect-offset0.5.json")
+    assert names[0].endswith("_detect_familiar5.json")
+    assert names[1].endswith("_detect-offset0.5_familiar5.json")
     name = task_path(RobustTask(offset, 21, "push", "particles", "scripted", (1, 2))).name
     assert name.endswith("_offset0.5.json")
     for bad in (-0.5, float("nan")):
@@ -339,17 +341,25 @@ def test_familiar_novelty_reaches_the_belief_rows_and_keys_their_records() -> No
         task_path,
     )
 
-    familiar, plain = RobustnessConfig(familiar_novelty=5.0), RobustnessConfig()
+    """By default the EKF rows report unfamiliar images as doubtful (5), the particle rows
+    do not; records are keyed by it; the experience maps (several maps) never get it."""
+    familiar = RobustnessConfig(particle_familiar_novelty=5.0)
+    plain = RobustnessConfig(familiar_novelty=0.0)
+    assert belief_options(RobustnessConfig(), "ekf")["familiar_novelty"] == 5.0
+    assert "familiar_novelty" not in belief_options(RobustnessConfig(), "particles")
     for source in ("ekf", "particles"):
         assert belief_options(familiar, source)["familiar_novelty"] == 5.0
         assert "familiar_novelty" not in belief_options(plain, source)
     assert belief_options(familiar, "oracle") == {}
+    experiences = RobustnessConfig(randomised_map="experiences")
+    assert "familiar_novelty" not in belief_options(experiences, "ekf", "night")
 
     def name(config: RobustnessConfig, source: str) -> str:
         return task_path(RobustTask(config, 21, "nominal", source, "scripted", (1, 2))).name
 
     assert name(familiar, "ekf") == name(plain, "ekf").replace("_detect", "_detect_familiar5")
     assert "_familiar5" in name(familiar, "particles")
+    assert "_familiar" not in name(RobustnessConfig(), "particles")
     assert name(familiar, "oracle") == name(plain, "oracle")
     with pytest.raises(ValueError, match="familiar_novelty"):
         RobustnessConfig(familiar_novelty=float("nan")).lists()
