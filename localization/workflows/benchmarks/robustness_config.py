@@ -127,11 +127,13 @@ class RobustnessConfig:
                 "without it, pushed goals reached sooner; docs/benchmarks.md section 11)"})
     guard_agree: float = field(default=0.0, metadata={
         "help": "m: the EKF rows' guard yields only while the image pose lies this close to "
-                "the belief (ImageGuard(agree=...)); 0: whatever the belief"})
+                "the belief (ImageGuard(agree=...)); 0: whatever the belief (0.3 failed its "
+                "rule held out at stop 76: pushed contact steps 0.065 -> 0.105)"})
     guard_memory: int = field(default=0, metadata={
         "help": "the EKF rows' guard also checks each command from the image poses of this "
                 "many earlier steps, carried forward by the motion model (ImageGuard(memory="
-                "...)); 0: the latest image only"})
+                "...)); 0: the latest image only (5 failed its rule held out at stop 76: "
+                "pushed contact steps 0.065 -> 0.150)"})
     particle_guard_patience: int = field(default=20, metadata={
         "help": "the same for the particle rows' guard (0: it never yields). 20 alone failed "
                 "its rule on tuning cities 13-14 (pushed contact steps 0.080 -> 0.120); with "
@@ -143,7 +145,8 @@ class RobustnessConfig:
                 "to the belief (ImageGuard(agree=...)); 0: whatever the belief. 0.3 since "
                 "stop 75 (fixed before its runs: a pushed belief 1.2-1.5 m off stays guarded)"})
     particle_guard_memory: int = field(default=0, metadata={
-        "help": "the same for the particle rows' guard (0: the latest image only)"})
+        "help": "the same for the particle rows' guard (0: the latest image only; 5 failed "
+                "on tuning cities 13-14 at stop 76, pushed contact steps 0.080 -> 0.085)"})
     familiar_novelty: float = field(default=5.0, metadata={
         "help": "the EKF rows report 'doubtful' instead of 'tracking' while the median "
                 "relative novelty of the last 10 images exceeds this (BeliefWrapper("
