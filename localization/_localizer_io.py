@@ -57,6 +57,8 @@ def save_localizer(loc: Any, path: str | Path | io.BytesIO) -> None:
         arrays["initial_noise"] = loc.initial_noise_
     if loc.process_noise_body_ is not None:
         arrays["process_noise_body"] = loc.process_noise_body_
+    if getattr(loc, "novelty_ref_", None) is not None:
+        arrays["novelty_ref"] = np.float64(loc.novelty_ref_)
     np.savez_compressed(path, settings=np.array(json.dumps(settings)),
                         regressor=np.frombuffer(buf.getvalue(), dtype=np.uint8), **arrays)
 
@@ -117,6 +119,7 @@ def load_localizer(cls: type, path: str | Path | io.BytesIO, name: str = "") -> 
         loc.control_gain_ = np.asarray(data["control_gain"], dtype=np.float64)
         loc.process_noise_body_ = data.get("process_noise_body")
         loc.initial_noise_ = data.get("initial_noise")
+        loc.novelty_ref_ = float(data["novelty_ref"]) if "novelty_ref" in data else None
         loc.dropped_ = np.asarray(data.get("dropped", np.zeros(0)), dtype=np.intp)
         loc.city_ = check_city_info(settings.get("city"), "the file's city")
         loc.fingerprint_ = settings.get("fingerprint")

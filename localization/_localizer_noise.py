@@ -89,7 +89,10 @@ class NoiseModelMixin:
         2. R of each model from the residuals of its measurements at the true poses:
            robust covariance, inflated per component by the residuals' correlation time;
            the heteroscedastic scales (``noise_scale_``, from :meth:`fit`'s K-fold
-           residuals) are rescaled to average 1 over the drive's frames.
+           residuals) are rescaled to average 1 over the drive's frames;
+        3. ``novelty_ref_``: the median novelty of the drive's frames (the images R
+           describes; ``BeliefFilter(novelty_noise=True)`` scales R by an image's novelty
+           beyond it).
 
         Resets the consistency calibration (:meth:`calibrate`) and the quality report
         (``quality_``).
@@ -109,6 +112,8 @@ class NoiseModelMixin:
         self.fit_process_noise(motion_model, poses, controls)
         W = self.transform(images)
         self._set_noise(self._residuals(self.regressor_, W, poses), sequence=True)
+        u = self.regressor_.novelty(W)
+        self.novelty_ref_ = float(np.nanmedian(u)) if np.isfinite(u).any() else None
         for model in getattr(self, "noise_scale_", {}).values():  # the drive's level
             model.normalize(poses, self._geometry(model, poses, W))
         self.consistency_ = {}
@@ -207,7 +212,7 @@ class NoiseModelMixin:
             held.append(poses[test])
             geometry.append(model.geometry(model.density_index(poses[train]), poses[test],
                                            reg.embed_pose_jacobian(self._to_model(poses[test])),
-                                           novelty(reg, W[test])))
+                                           reg.novelty(W[test])))
         if failed:
             if len(held) < 2:
                 raise ValueError(f"noise_folds={self.noise_folds}: fewer than two folds could "
@@ -239,7 +244,7 @@ class NoiseModelMixin:
         (n, 3) with images of features W (n, m) (None: typical frames)."""
         J = self.regressor_.embed_pose_jacobian(self._to_model(np.nan_to_num(poses)))
         J[~np.all(np.isfinite(poses), axis=1)] = np.nan
-        u = None if W is None else novelty(self.regressor_, check_array(
+        u = None if W is None else self.regressor_.novelty(check_array(
             W, "W", shape=(len(poses), None)))
         return model.geometry(self._density_index(model), poses, J, u)
 
@@ -325,13 +330,6 @@ class NoiseModelMixin:
         return out
 
 
-def novelty(reg: GSERegressor, W: Array) -> Array:
-    """Distance (n,) of features W (n, m) from the learned feature manifold,
-    ``|w - g_u(r*(w))|`` (reduce-then-recover; NaN out of the domain): large for an image
-    unlike every training image (another light, an occluder)."""
-    return np.linalg.norm(W - reg.reconstruct(W), axis=1)
-
-
 class HeteroscedasticMeasurement(FunctionMeasurement):
     """A :class:`FunctionMeasurement` whose R(x) also depends on the current image:
     :meth:`observe` sets its novelty (the belief filter calls it before each update);
@@ -345,5 +343,5 @@ class HeteroscedasticMeasurement(FunctionMeasurement):
 
     def observe(self, w: ArrayLike) -> None:
         """The features w (m,) of the image of the next update."""
-        u = float(novelty(self._regressor, np.asarray(w, dtype=np.float64).reshape(1, -1))[0])
+        u = float(self._regressor.novelty(np.asarray(w, dtype=np.float64).reshape(1, -1))[0])
         self.novelty = u if np.isfinite(u) else None

@@ -42,7 +42,7 @@ from sklearn.exceptions import NotFittedError
 from localization._district_maps import District, transform_maps
 from localization._districts_io import load_districts, save_districts
 from localization._districts_noise import DistrictNoiseMixin, inside, provisional_noise
-from localization._localizer_noise import check_data, novelty
+from localization._localizer_noise import check_data
 from localization._validation import check_array, check_int, check_real
 from localization.geometry import Array, body_to_world
 from localization.gse.graph import DisconnectedGraphError
@@ -229,7 +229,7 @@ class DistrictLocalizer(DistrictNoiseMixin):
     @staticmethod
     def _novelty_scale(loc: AppearanceLocalizer, images: Any) -> float:
         sub = np.random.default_rng(0).permutation(len(images))[:_NOVELTY_SAMPLE]
-        u = novelty(loc.regressor_, loc.transform(images[sub]))
+        u = loc.regressor_.novelty(loc.transform(images[sub]))
         u = u[np.isfinite(u)]
         return float(np.median(u)) if len(u) and np.median(u) > 0 else 1.0
 
@@ -324,7 +324,7 @@ class DistrictLocalizer(DistrictNoiseMixin):
                 continue
             if not self._holds(k, x):
                 continue
-            u = float(novelty(view.localizer.regressor_, wk[None])[0])
+            u = float(view.localizer.regressor_.novelty(wk[None])[0])
             if np.isfinite(u):
                 out.append((u / self.novelty_scale_[k], k, x))
         return sorted(out, key=lambda c: c[0])

@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from localization._districts_noise import provisional_noise
-from localization._localizer_noise import check_data, novelty
+from localization._localizer_noise import check_data
 from localization.districts import District, DistrictLocalizer
 from localization.geometry import Array
 from localization.gse.graph import DisconnectedGraphError
@@ -160,7 +160,7 @@ class ExperienceLocalizer(DistrictLocalizer):
                              f"{len(self._views)} experiences, shape (n, "
                              f"{len(self._views) * self.n_features_}), got {W.shape}")
         U = np.column_stack([
-            novelty(view.localizer.regressor_, W[:, view._block]) / self.novelty_scale_[k]
+            view.localizer.regressor_.novelty(W[:, view._block]) / self.novelty_scale_[k]
             for k, view in enumerate(self._views)])
         return np.where(np.isfinite(U), U, np.inf)
 

@@ -4,7 +4,7 @@ A belief on the wrong map (another city's localizer, ``allow_other_city=True``; 
 has changed) still finds places there that its images fit well enough, and says "tracking"
 while it is metres off. The images themselves say which map they belong to. The novelty of
 an image's features ``w`` is their distance from the map's learned feature manifold,
-``u(w) = |w - g_u(r*(w))|`` (reduce-then-recover, :func:`localization._localizer_noise.novelty`),
+``u(w) = |w - g_u(r*(w))|`` (reduce-then-recover, :meth:`GSERegressor.novelty <localization.gse.GSERegressor.novelty>`),
 and its *relative* novelty is ``u(w) / u_ref``, with ``u_ref`` the median novelty of an
 evenly spaced sample of the map's own training images. :class:`Familiarity` keeps the
 relative novelty of the last ``window`` images; while their median exceeds ``threshold`` the
@@ -24,7 +24,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from localization._localizer_noise import novelty
 from localization._validation import check_int, check_real
 
 __all__ = ["FAMILIAR_WINDOW", "Familiarity", "novelty_scale"]
@@ -40,7 +39,7 @@ def novelty_scale(regressor: Any, sample: int = _SAMPLE) -> float:
     training features)."""
     Ws = regressor._ws
     rows = np.unique(np.linspace(0, len(Ws) - 1, min(sample, len(Ws))).astype(int))
-    u = novelty(regressor, Ws[rows] * regressor.w_scale_ + regressor.w_mean_)
+    u = regressor.novelty(Ws[rows] * regressor.w_scale_ + regressor.w_mean_)
     return float(max(np.nanmedian(u), 1e-12))
 
 
@@ -78,7 +77,7 @@ class Familiarity:
 
     def update(self, w: ArrayLike) -> float:
         """Add the features ``w`` (m,) of the next image; its relative novelty."""
-        u = float(novelty(self.regressor, np.asarray(w, dtype=np.float64)[None])[0])
+        u = float(self.regressor.novelty(np.asarray(w, dtype=np.float64)[None])[0])
         self.novelty = u / self.scale_ if np.isfinite(u) else float("inf")
         self._recent.append(self.novelty)
         return self.novelty

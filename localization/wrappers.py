@@ -59,7 +59,7 @@ LOCALIZE = ("image", "global")
 FILTER_OPTIONS = {
     "ekf": ("detect_divergence", "alpha", "inflate_factor", "noise", "free_space",
             "contact_motion", "project_contacts", "heading_check", "familiar_novelty",
-            "turn_response", "adaptive_noise", "measurement_bias"),
+            "turn_response", "adaptive_noise", "measurement_bias", "novelty_noise"),
     "particles": ("n_particles", "min_particles", "kld_epsilon", "kld_confidence",
                   "resample_threshold", "resample", "alpha", "alpha_slow",
                   "alpha_fast", "injection_ratio", "max_injection", "ambiguous_injection",

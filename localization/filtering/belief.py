@@ -73,6 +73,7 @@ from localization.filtering.map_contact import (
     contact_kinds,
 )
 from localization.filtering.measurement_bias import make_ekf, measurement_bias_for
+from localization.filtering.novelty_noise import novelty_noise as novelty_noise_for
 from localization.filtering.particle_start import DEFAULT_P0
 from localization.filtering.recorded_run import run_recorded
 from localization.filtering.restart_trial import RestartTrial, ViewOdometer
@@ -121,6 +122,10 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin, BeliefContact
         Carry a persistent (AR(1)) bias of the measurement beside the pose
         (:mod:`~localization.filtering.measurement_bias`; a dict: ``rho``, ``phi``): maps
         that err in runs do not make the belief over-confident. False: off.
+    novelty_noise : bool or dict
+        Scale R by the image's novelty beyond that of the frames R came from
+        (:class:`~localization.filtering.novelty_noise.NoveltyNoise`; a dict: its settings;
+        a localizer of one map fitted with ``fit_noise``). False: off.
     free_space : callable, optional
         The map, ``free_space(points (n, 2), margin) -> (n,) bool`` (``city.free_mask``): a
         contact where it has room around the belief makes it "lost". None: no contact makes
@@ -176,7 +181,8 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin, BeliefContact
                  familiar_novelty: float | None = None,
                  turn_response: bool | TurnResponse = False,
                  adaptive_noise: bool | dict[str, Any] = False,
-                 measurement_bias: bool | dict[str, Any] = False) -> None:
+                 measurement_bias: bool | dict[str, Any] = False,
+                 novelty_noise: bool | dict[str, Any] = False) -> None:
         check_localizer(localizer)
         check_choice(noise, "noise", NOISE_MODELS)
         self.contact_motion = check_choice(contact_motion, "contact_motion", CONTACT_MOTIONS)
@@ -195,6 +201,7 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin, BeliefContact
         self.noise = noise
         self.adaptive = innovation_scale(adaptive_noise)
         self.bias = measurement_bias_for(measurement_bias)
+        self.novelty = novelty_noise_for(novelty_noise, localizer)
         self._models: dict[int, Any] = {}  # measurement model per (district) localizer
         self.model = None if callable(getattr(localizer, "local", None)) else \
             self._local(None)[1]
@@ -410,8 +417,10 @@ class BeliefFilter(RecoveryMixin, StatusMixin, FamiliarStartMixin, BeliefContact
             return np.nan, "out_of_domain"
         prior = self.ekf.snapshot()
         try:
-            self.last_update = self.ekf.update(z, self.model if self.adaptive is None
-                                               else self.adaptive.wrap(self.model))
+            model = self.model if self.novelty is None else \
+                self.novelty.wrap(self.model, view, w)
+            self.last_update = self.ekf.update(z, model if self.adaptive is None
+                                               else self.adaptive.wrap(model))
         except OutOfDomainError:
             return np.nan, "out_of_domain"
         accepted = self.last_update.accepted

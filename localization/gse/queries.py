@@ -221,6 +221,12 @@ class GSEQueryMixin:
         gu, _, _ = self.gse_._recover(r, slice(0, len(self.w_mean_)))
         return gu * self.w_scale_ + self.w_mean_
 
+    def novelty(self, W: Array) -> Array:
+        """Distance (n,) of features W (n, m) from the learned feature manifold,
+        ``|w - g_u(r*(w))|`` (reduce-then-recover; NaN out of the domain): large for an image
+        unlike every training image (another light, an occluder)."""
+        return np.linalg.norm(W - self.reconstruct(W), axis=1)
+
     def feature_tangents(self, W: Array) -> Array:
         """Tangent vectors of the feature manifold at ``g_u(r*(w))``: the feature block
         ``G_u`` of the recovery Jacobian field (method §7.2), shape (n, m, q), original units

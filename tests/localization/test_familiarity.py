@@ -25,6 +25,9 @@ class NormRegressor:
         out[np.isnan(W).any(axis=1)] = np.nan  # out of the domain: NaN
         return out
 
+    def novelty(self, W: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(W - self.reconstruct(W), axis=1)
+
 
 def test_the_median_of_the_window_decides():
     """Training images' median novelty 2 is the unit; the window's median against the

@@ -250,13 +250,14 @@ def single_image_scores(loc: Any, images: np.ndarray, poses: np.ndarray, verify:
 
 def closed_loop(env: OcclusionRecorder, loc: Any, lanes: str, steps: int, k: int, seed: int,
                 noise: str = "global", adaptive: bool = False, bias: bool = False,
-                familiar: float = 0.0) -> dict[str, Any]:
+                familiar: float = 0.0, novelty: bool = False) -> dict[str, Any]:
     """Drive ``k`` on the belief (around the route from path point ``600 k``, or a random
     street tour; measurement noise ``noise``, scaled by the innovations if ``adaptive``,
     with a persistent bias state if ``bias``, (re)starts only from images of relative
-    novelty <= ``familiar`` if > 0): squared errors, run-averaged NEES, occlusion, jumps."""
+    novelty <= ``familiar`` if > 0, R scaled by the image's novelty if ``novelty``): squared
+    errors, run-averaged NEES, occlusion, jumps."""
     options = {"filter_options": {"noise": noise, "adaptive_noise": adaptive,
-                                  "measurement_bias": bias}}
+                                  "measurement_bias": bias, "novelty_noise": novelty}}
     if familiar > 0:
         options["filter_options"]["familiar_novelty"] = familiar
     if lanes == "route":
@@ -297,6 +298,7 @@ def run_appearance_bench(args: AppearanceBenchConfig) -> dict[str, Any]:
     """Run the benchmark; write ``bench_appearance.json`` / ``.md``; return the result."""
     args = args.resolved()
     cities, conditions, trainings = args.lists()
+    novel = args.novelty_trainings()
     bad = [t for t in trainings if t not in TRAININGS]
     if bad:
         raise ValueError(f"trainings: unknown {bad}; choose from {list(TRAININGS)}")
@@ -332,7 +334,8 @@ def run_appearance_bench(args: AppearanceBenchConfig) -> dict[str, Any]:
                                                         args.drive_steps, k, base + 100 + k,
                                                         args.noise, args.adaptive_noise,
                                                         args.measurement_bias,
-                                                        args.familiar_novelty))
+                                                        args.familiar_novelty,
+                                                        t in novel))
                 env.close()
                 bar.update()
     summary = {t: {c: summarize(single[t][c], drives[t][c]) if drives[t][c] else None
@@ -352,6 +355,8 @@ def run_appearance_bench(args: AppearanceBenchConfig) -> dict[str, Any]:
                        f"{args.drive_steps} steps per city and condition, {args.noise} R"
                        + (" scaled by the innovations" if args.adaptive_noise else "")
                        + (" with a persistent bias state" if args.measurement_bias else "")
+                       + (f", scaled by the image's novelty ({', '.join(novel)})"
+                          if novel else "")
                        + (f", (re)starts only from images of novelty <= "
                           f"{args.familiar_novelty:g}" if args.familiar_novelty else "")
                        + (f"; single images verified against {args.verify} retrieved "

@@ -137,6 +137,11 @@ class AppearanceBenchConfig:
                 "docs/method.md section 13.5; 0: off). Off: with 3, R(theta, w) and the bias "
                 "state, the five maps on tuning cities 11-12 had 5 presets in the NEES band "
                 "against 4 at 1.51x the mean RMSE (docs/benchmarks.md section 9, stop 70)"})
+    novelty_noise: str = field(default="", metadata={
+        "help": "comma-separated localizers (daylight, randomised) whose closed loop scales "
+                "R by the image's novelty beyond the noise drive's "
+                "(BeliefFilter(novelty_noise=True), docs/method.md section 15.7; the "
+                "randomised localizer has several maps and cannot); '': off"})
     calibrate_on_belief: bool = field(default=False, metadata={
         "help": "refine each localizer's consistency on a drive on its own belief (in the "
                 "training's look) after the true-pose drive; off: on tuning cities 11-12 it "
@@ -163,3 +168,12 @@ class AppearanceBenchConfig:
         return ([int(s) for s in self.cities.split(",")],
                 [s.strip() for s in self.conditions.split(",")],
                 [s.strip() for s in self.trainings.split(",")])
+
+    def novelty_trainings(self) -> list[str]:
+        """The localizers of ``novelty_noise``; ValueError naming the option for others."""
+        names = [s.strip() for s in self.novelty_noise.split(",") if s.strip()]
+        bad = [n for n in names if n != "daylight"]
+        if bad:
+            raise ValueError(f"novelty_noise: {bad} cannot scale R by novelty (only "
+                             "'daylight', a localizer of one map)")
+        return names

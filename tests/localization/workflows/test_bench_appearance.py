@@ -95,12 +95,12 @@ def test_heteroscedastic_noise_fits_the_folds_and_reaches_the_drives(monkeypatch
     with pytest.raises(RuntimeError, match="stop here"):
         appearance.closed_loop(None, None, "route", 10, 0, 1, args.noise)
     assert seen["filter_options"] == {"noise": "heteroscedastic", "adaptive_noise": False,
-                                      "measurement_bias": False}
+                                      "measurement_bias": False, "novelty_noise": False}
     assert set(seen["filter_options"]) <= set(FILTER_OPTIONS["ekf"])  # the wrapper takes it
     with pytest.raises(RuntimeError, match="stop here"):  # --appearance-adaptive-noise
         appearance.closed_loop(None, None, "route", 10, 0, 1, "global", True)
     assert seen["filter_options"] == {"noise": "global", "adaptive_noise": True,
-                                      "measurement_bias": False}
+                                      "measurement_bias": False, "novelty_noise": False}
     with pytest.raises(RuntimeError, match="stop here"):  # --appearance-measurement-bias
         appearance.closed_loop(None, None, "route", 10, 0, 1, "global", False, True)
     assert seen["filter_options"]["measurement_bias"] is True
@@ -109,6 +109,13 @@ def test_heteroscedastic_noise_fits_the_folds_and_reaches_the_drives(monkeypatch
         appearance.closed_loop(None, None, "route", 10, 0, 1, "global", False, False, 3.0)
     assert seen["filter_options"]["familiar_novelty"] == 3.0
     assert set(seen["filter_options"]) <= set(FILTER_OPTIONS["ekf"])
+    with pytest.raises(RuntimeError, match="stop here"):  # --appearance-novelty-noise
+        appearance.closed_loop(None, None, "route", 10, 0, 1, "global", novelty=True)
+    assert seen["filter_options"]["novelty_noise"] is True
+    assert AppearanceBenchConfig(novelty_noise="daylight").novelty_trainings() == ["daylight"]
+    assert AppearanceBenchConfig().novelty_trainings() == []
+    with pytest.raises(ValueError, match="novelty_noise.*randomised"):
+        AppearanceBenchConfig(novelty_noise="daylight,randomised").novelty_trainings()
 
 
 def test_experience_maps_are_daylight_and_a_draw_of_each_other_family():
