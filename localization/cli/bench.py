@@ -195,6 +195,10 @@ def _check_appearance_bench(c: AppearanceBenchConfig) -> None:
                          "map already draws each image's camera")
     check_choice("appearance_first_order", c.first_order, FIRST_ORDER)
     check_choice("appearance_noise", c.noise, NOISE_MODELS)
+    if c.noise_trainings.strip():
+        check_choices("appearance_noise_trainings", c.noise_trainings, TRAININGS)
+    if c.novelty_noise.strip():
+        check_choices("appearance_novelty_noise", c.novelty_noise, ("daylight",))
     check_numbers(c, positive=("image_size", "n_train", "n_drive", "n_components", "n_test",
                                "n_drives", "drive_steps", "patch_floor"),
                   non_negative=("motion_noise", "seed", "forward_ridge", "verify", "turns",

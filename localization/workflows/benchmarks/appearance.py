@@ -182,7 +182,7 @@ def localizer_params(args: AppearanceBenchConfig, training: str = "daylight") ->
         weights = small_cnn_weights("perspective", "conditions")
         return {"features": "small_cnn",
                 "features_params": {"n_components": args.n_components, "weights": str(weights)},
-                "regressor_params": regressor_params(args), **noise_params(args)}
+                "regressor_params": regressor_params(args), **noise_params(args, training)}
     params: dict[str, Any] = {"n_components": args.n_components}
     if args.normalize != "none":
         params["normalize"] = args.normalize
@@ -191,13 +191,20 @@ def localizer_params(args: AppearanceBenchConfig, training: str = "daylight") ->
     if smooths(args, training):
         params["smooth"] = args.smooth
     return {"features_params": params, "regressor_params": regressor_params(args),
-            **noise_params(args)}
+            **noise_params(args, training)}
 
 
-def noise_params(args: AppearanceBenchConfig) -> dict[str, Any]:
-    """``noise_folds`` of the localizers: 5 for the heteroscedastic R (``args.noise``)."""
+def noise_params(args: AppearanceBenchConfig, training: str = "daylight") -> dict[str, Any]:
+    """``noise_folds`` of the localizer ``training``: 5 for a heteroscedastic R
+    (:meth:`AppearanceBenchConfig.noise_of`)."""
     check_choice(args.noise, "noise", NOISE_MODELS)
-    return {"noise_folds": 5} if args.noise == "heteroscedastic" else {}
+    return {"noise_folds": 5} if args.noise_of(training)[0] == "heteroscedastic" else {}
+
+
+def noise_label(noise: str, adaptive: bool, bias: bool) -> str:
+    """A closed loop's noise model in the report's words."""
+    return (f"{noise} R" + (" scaled by the innovations" if adaptive else "")
+            + (" with a persistent bias state" if bias else ""))
 
 
 def regressor_params(args: AppearanceBenchConfig) -> dict[str, Any]:
@@ -332,8 +339,7 @@ def run_appearance_bench(args: AppearanceBenchConfig) -> dict[str, Any]:
                     for k in range(args.n_drives):
                         drives[t][c].append(closed_loop(env, loc, args.lanes,
                                                         args.drive_steps, k, base + 100 + k,
-                                                        args.noise, args.adaptive_noise,
-                                                        args.measurement_bias,
+                                                        *args.noise_of(t),
                                                         args.familiar_novelty,
                                                         t in novel))
                 env.close()
@@ -352,9 +358,8 @@ def run_appearance_bench(args: AppearanceBenchConfig) -> dict[str, Any]:
                        + (", each map image through its own random camera"
                           if args.map_camera == "random" else "") + "); "
                        f"{args.n_test} test images and {args.n_drives} drive(s) of "
-                       f"{args.drive_steps} steps per city and condition, {args.noise} R"
-                       + (" scaled by the innovations" if args.adaptive_noise else "")
-                       + (" with a persistent bias state" if args.measurement_bias else "")
+                       f"{args.drive_steps} steps per city and condition, "
+                       + "; ".join(f"{t}: {noise_label(*args.noise_of(t))}" for t in trainings)
                        + (f", scaled by the image's novelty ({', '.join(novel)})"
                           if novel else "")
                        + (f", (re)starts only from images of novelty <= "

@@ -82,7 +82,15 @@ def test_heteroscedastic_noise_fits_the_folds_and_reaches_the_drives(monkeypatch
     from localization.workflows.benchmarks import appearance
     from localization.wrappers import FILTER_OPTIONS
 
-    assert "noise_folds" not in localizer_params(AppearanceBenchConfig())
+    default = AppearanceBenchConfig()  # R(theta, w) and the bias state: the daylight map only
+    assert localizer_params(default, "daylight")["noise_folds"] == 5
+    assert "noise_folds" not in localizer_params(default, "randomised")
+    assert default.noise_of("daylight") == ("heteroscedastic", False, True)
+    assert default.noise_of("randomised") == ("global", False, False)
+    both = AppearanceBenchConfig(noise_trainings="daylight,randomised", adaptive_noise=True)
+    assert both.noise_of("randomised") == ("heteroscedastic", True, True)
+    assert AppearanceBenchConfig(noise_trainings="").noise_of("daylight") == ("global", False, False)
+    assert "noise_folds" not in localizer_params(AppearanceBenchConfig(noise="global"))
     args = AppearanceBenchConfig(noise="heteroscedastic")
     assert localizer_params(args)["noise_folds"] == 5
     seen = {}
@@ -154,6 +162,8 @@ def test_targets_are_the_issues():
     ("smooth", float("inf"), "--appearance-smooth"),
     ("map_camera", "lens", "--appearance-map-camera"),
     ("familiar_novelty", -1.0, "--appearance-familiar-novelty"),
+    ("noise_trainings", "nightly", "--appearance-noise-trainings"),
+    ("novelty_noise", "randomised", "--appearance-novelty-noise"),
 ])
 def test_bad_options_are_named(field, value, option):
     args = Args(only="appearance", appearance=AppearanceBenchConfig(**{field: value}))
