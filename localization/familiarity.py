@@ -35,12 +35,8 @@ _SAMPLE = 500  # training images in the median novelty
 
 def novelty_scale(regressor: Any, sample: int = _SAMPLE) -> float:
     """``u_ref``: the median novelty of ``sample`` evenly spaced training images of a fitted
-    :class:`~localization.gse.GSERegressor` (their features recovered from its standardised
-    training features)."""
-    Ws = regressor._ws
-    rows = np.unique(np.linspace(0, len(Ws) - 1, min(sample, len(Ws))).astype(int))
-    u = regressor.novelty(Ws[rows] * regressor.w_scale_ + regressor.w_mean_)
-    return float(max(np.nanmedian(u), 1e-12))
+    :class:`~localization.gse.GSERegressor` (:meth:`~localization.gse.GSERegressor.training_novelty`)."""
+    return float(max(np.nanmedian(regressor.training_novelty(sample)), 1e-12))
 
 
 class Familiarity:

@@ -227,6 +227,13 @@ class GSEQueryMixin:
         unlike every training image (another light, an occluder)."""
         return np.linalg.norm(W - self.reconstruct(W), axis=1)
 
+    def training_novelty(self, sample: int = 500) -> Array:
+        """:meth:`novelty` (k,) of at most ``sample`` evenly spaced training samples (their
+        features recovered from the standardised ones the model keeps): the scale of a
+        familiar image."""
+        rows = np.unique(np.linspace(0, len(self._ws) - 1, min(sample, len(self._ws))).astype(int))
+        return self.novelty(self._ws[rows] * self.w_scale_ + self.w_mean_)
+
     def feature_tangents(self, W: Array) -> Array:
         """Tangent vectors of the feature manifold at ``g_u(r*(w))``: the feature block
         ``G_u`` of the recovery Jacobian field (method §7.2), shape (n, m, q), original units

@@ -28,6 +28,9 @@ class NormRegressor:
     def novelty(self, W: np.ndarray) -> np.ndarray:
         return np.linalg.norm(W - self.reconstruct(W), axis=1)
 
+    def training_novelty(self, sample: int = 500) -> np.ndarray:
+        return self.novelty(self._ws[:sample] * self.w_scale_ + self.w_mean_)
+
 
 def test_the_median_of_the_window_decides():
     """Training images' median novelty 2 is the unit; the window's median against the

@@ -428,6 +428,19 @@ def test_reconstruct_and_feature_tangents(planar):
     assert np.median(np.degrees(np.arccos(np.clip(cos, -1, 1)))) < 15  # measured 7.4 deg
 
 
+def test_novelty_is_the_distance_from_the_feature_manifold(planar):
+    """|w - g_u(r*(w))|: small for the training samples, larger off the manifold."""
+    W, _T, Wt, _Tt, _phi, model = planar
+    np.testing.assert_allclose(model.novelty(Wt), np.linalg.norm(Wt - model.reconstruct(Wt), axis=1))
+    u = model.training_novelty(50)
+    assert u.shape == (50,)
+    np.testing.assert_allclose(u, model.novelty(W[np.linspace(0, len(W) - 1, 50).astype(int)]),
+                               rtol=1e-6, atol=1e-9)
+    assert model.training_novelty(10 ** 6).shape == (len(W),)
+    off = Wt + 0.5 * np.std(W, axis=0) * np.random.default_rng(0).standard_normal(Wt.shape)
+    assert np.nanmedian(model.novelty(off)) > 3 * np.median(u)
+
+
 def test_new_options_are_validated():
     W, T, _ = regression_manifold(200, dim_theta=2, seed=0)
     with pytest.raises(ValueError, match="loop_cut"):
