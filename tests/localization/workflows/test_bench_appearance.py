@@ -82,14 +82,19 @@ def test_heteroscedastic_noise_fits_the_folds_and_reaches_the_drives(monkeypatch
     from localization.workflows.benchmarks import appearance
     from localization.wrappers import FILTER_OPTIONS
 
-    default = AppearanceBenchConfig()  # R(theta, w) and the bias state: the daylight map only
-    assert localizer_params(default, "daylight")["noise_folds"] == 5
-    assert "noise_folds" not in localizer_params(default, "randomised")
-    assert default.noise_of("daylight") == ("heteroscedastic", False, True)
-    assert default.noise_of("randomised") == ("global", False, False)
-    both = AppearanceBenchConfig(noise_trainings="daylight,randomised", adaptive_noise=True)
+    assert "noise_folds" not in localizer_params(AppearanceBenchConfig())  # the global R
+    assert AppearanceBenchConfig().noise_of("randomised") == ("global", False, False)
+    daylight = AppearanceBenchConfig(noise="heteroscedastic", measurement_bias=True,
+                                     noise_trainings="daylight")
+    assert localizer_params(daylight, "daylight")["noise_folds"] == 5
+    assert "noise_folds" not in localizer_params(daylight, "randomised")
+    assert daylight.noise_of("daylight") == ("heteroscedastic", False, True)
+    assert daylight.noise_of("randomised") == ("global", False, False)
+    both = AppearanceBenchConfig(noise="heteroscedastic", adaptive_noise=True,
+                                 measurement_bias=True)
     assert both.noise_of("randomised") == ("heteroscedastic", True, True)
-    assert AppearanceBenchConfig(noise_trainings="").noise_of("daylight") == ("global", False, False)
+    assert AppearanceBenchConfig(noise="heteroscedastic", noise_trainings="").noise_of(
+        "daylight") == ("global", False, False)
     assert "noise_folds" not in localizer_params(AppearanceBenchConfig(noise="global"))
     args = AppearanceBenchConfig(noise="heteroscedastic")
     assert localizer_params(args)["noise_folds"] == 5
