@@ -15,7 +15,7 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-__all__ = ["LIBRARIES", "ROOT", "provenance"]
+__all__ = ["LIBRARIES", "LOADED_COMMIT", "ROOT", "provenance"]
 
 #: the distributions whose versions a result records
 LIBRARIES = ("numpy", "scipy", "scikit-learn", "mujoco", "gymnasium", "torch", "filterpy",
@@ -50,7 +50,18 @@ def git_commit() -> str | None:
     return head + ("+dirty" if dirty else "") if head else None
 
 
+#: the commit when this module was first imported, i.e. when a benchmark's code was loaded
+#: (a result is written at the end of its run, and HEAD may have moved on meanwhile)
+LOADED_COMMIT = git_commit()
+
+
 def provenance() -> dict[str, Any]:
-    """``{"machine", "python", "git", "versions"}`` of this run, for a result's JSON."""
-    return {"machine": platform.platform(), "python": platform.python_version(),
-            "git": git_commit(), "versions": library_versions()}
+    """``{"machine", "python", "git", "versions"}`` of this run, for a result's JSON.
+    ``git`` is the commit whose code the process loaded (:data:`LOADED_COMMIT`); when the
+    checkout has moved since, ``git_at_end`` names the commit at the time of the call."""
+    out = {"machine": platform.platform(), "python": platform.python_version(),
+           "git": LOADED_COMMIT, "versions": library_versions()}
+    now = git_commit()
+    if now != LOADED_COMMIT:
+        out["git_at_end"] = now
+    return out

@@ -12,7 +12,8 @@ from localization.workflows.benchmarks import provenance as prov
 
 def test_provenance_names_the_installed_versions() -> None:
     p = prov.provenance()
-    assert set(p) == {"machine", "python", "git", "versions"}
+    assert set(p) <= {"machine", "python", "git", "versions", "git_at_end"}
+    assert {"machine", "python", "git", "versions"} <= set(p)
     assert p["versions"]["numpy"] == np.__version__
     assert set(p["versions"]) == set(prov.LIBRARIES)
     json.dumps(p)  # goes into a result's JSON as it is
@@ -28,3 +29,13 @@ def test_outside_a_checkout_the_commit_is_none(monkeypatch: pytest.MonkeyPatch,
                                                tmp_path) -> None:
     monkeypatch.setattr(prov, "ROOT", tmp_path)  # not a git repository
     assert prov.git_commit() is None
+
+
+def test_the_commit_is_the_one_the_code_was_loaded_at(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A run writes its result at the end; the commit it names is the one it started on."""
+    monkeypatch.setattr(prov, "LOADED_COMMIT", "abc1234")
+    monkeypatch.setattr(prov, "git_commit", lambda: "def5678")
+    p = prov.provenance()
+    assert p["git"] == "abc1234" and p["git_at_end"] == "def5678"
+    monkeypatch.setattr(prov, "git_commit", lambda: "abc1234")
+    assert "git_at_end" not in prov.provenance()
