@@ -120,7 +120,7 @@ class AppearanceBenchConfig:
                 "the image's novelty, docs/method.md section 15.4; five more GSE fits per "
                 "localizer). Global: heteroscedastic with --appearance-measurement-bias passed "
                 "its rule for the daylight map at stop 69 (tuning cities 13-14: presets in the "
-                "NEES band 4 -> 6), but on stop 77's code the same runs read 4 -> 5 at 1.045x "
+                "NEES band 4 -> 6), but at stop 77 the same runs read 4 -> 5 at 1.045x "
                 "the mean RMSE (docs/benchmarks.md section 9, stops 69 and 77)"})
     adaptive_noise: bool = field(default=False, metadata={
         "help": "the closed loop's R scaled up while the accepted innovations are larger "
