@@ -306,6 +306,7 @@ def run_appearance_bench(args: AppearanceBenchConfig) -> dict[str, Any]:
     args = args.resolved()
     cities, conditions, trainings = args.lists()
     novel = args.novelty_trainings()
+    args.noise_of("daylight")  # a misspelt noise_trainings fails here, before any fit
     bad = [t for t in trainings if t not in TRAININGS]
     if bad:
         raise ValueError(f"trainings: unknown {bad}; choose from {list(TRAININGS)}")

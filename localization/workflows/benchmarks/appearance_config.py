@@ -185,8 +185,14 @@ class AppearanceBenchConfig:
 
     def noise_of(self, training: str) -> tuple[str, bool, bool]:
         """(noise, adaptive_noise, measurement_bias) of the localizer ``training``: the
-        options for the localizers of ``noise_trainings``, else the global R alone."""
-        if training in [s.strip() for s in self.noise_trainings.split(",")]:
+        options for the localizers of ``noise_trainings``, else the global R alone;
+        ValueError naming ``noise_trainings`` for a name that is no localizer (it would
+        otherwise leave both on the global R without a word)."""
+        names = [s.strip() for s in self.noise_trainings.split(",") if s.strip()]
+        bad = [n for n in names if n not in TRAININGS]
+        if bad:
+            raise ValueError(f"noise_trainings: unknown {bad}; choose from {list(TRAININGS)}")
+        if training in names:
             return self.noise, self.adaptive_noise, self.measurement_bias
         return "global", False, False
 

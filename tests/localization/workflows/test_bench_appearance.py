@@ -95,6 +95,8 @@ def test_heteroscedastic_noise_fits_the_folds_and_reaches_the_drives(monkeypatch
     assert both.noise_of("randomised") == ("heteroscedastic", True, True)
     assert AppearanceBenchConfig(noise="heteroscedastic", noise_trainings="").noise_of(
         "daylight") == ("global", False, False)
+    with pytest.raises(ValueError, match="noise_trainings.*daylght"):
+        AppearanceBenchConfig(noise_trainings="daylght").noise_of("randomised")
     assert "noise_folds" not in localizer_params(AppearanceBenchConfig(noise="global"))
     args = AppearanceBenchConfig(noise="heteroscedastic")
     assert localizer_params(args)["noise_folds"] == 5
