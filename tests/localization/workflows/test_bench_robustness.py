@@ -334,6 +334,8 @@ def test_guard_patience_is_set_per_belief_and_keys_the_records() -> None:
 
 
 def test_familiar_novelty_reaches_the_belief_rows_and_keys_their_records() -> None:
+    """By default the EKF rows report unfamiliar images as doubtful (5), the particle rows
+    do not; records are keyed by it; the experience maps (several maps) never get it."""
     from localization.workflows.benchmarks.robustness import (
         RobustnessConfig,
         RobustTask,
@@ -341,8 +343,6 @@ def test_familiar_novelty_reaches_the_belief_rows_and_keys_their_records() -> No
         task_path,
     )
 
-    """By default the EKF rows report unfamiliar images as doubtful (5), the particle rows
-    do not; records are keyed by it; the experience maps (several maps) never get it."""
     familiar = RobustnessConfig(particle_familiar_novelty=5.0)
     plain = RobustnessConfig(familiar_novelty=0.0)
     assert belief_options(RobustnessConfig(), "ekf")["familiar_novelty"] == 5.0
