@@ -44,6 +44,7 @@ from localization._districts_io import load_districts, save_districts
 from localization._districts_noise import DistrictNoiseMixin, inside, provisional_noise
 from localization._localizer_noise import check_data
 from localization._validation import check_array, check_int, check_real
+from localization.familiarity import novelty_scale
 from localization.geometry import Array, body_to_world
 from localization.gse.graph import DisconnectedGraphError
 from localization.gse.inverse import refine_poses, verify_poses
@@ -52,7 +53,6 @@ from localization.turned_views import check_turn_camera, turned_prediction
 
 __all__ = ["District", "DistrictLocalizer", "district_cells", "transform_maps"]
 
-_NOVELTY_SAMPLE = 500  # training images per district for its median novelty
 
 
 def district_cells(poses: ArrayLike, grid: tuple[int, int]) -> Array:
@@ -95,7 +95,9 @@ class DistrictLocalizer(DistrictNoiseMixin):
     n_train_ : ndarray (K,)
         Training images per district.
     novelty_scale_ : ndarray (K,)
-        Median novelty of each district's training images (the unit of
+        Median novelty of each district's training images (500 evenly spaced,
+        :func:`~localization.familiarity.novelty_scale`: the same unit as
+        :class:`~localization.familiarity.Familiarity`'s; the unit of
         :meth:`initial_belief`'s choice).
     consistency_ : dict of str -> ndarray (3,)
     control_gain_, process_noise_body_ :
@@ -167,7 +169,7 @@ class DistrictLocalizer(DistrictNoiseMixin):
             loc, keep = self._fit_district(k, images, poses, groups[k], camera, city, params)
             self.districts_.append(loc)
             self.train_index_.append(keep)
-            scales.append(self._novelty_scale(loc, images[keep]))
+            scales.append(novelty_scale(loc.regressor_))
         self._finish_fit(poses, scales)
 
     def _finish_fit(self, poses: Array, scales: list[float]) -> None:
@@ -225,13 +227,6 @@ class DistrictLocalizer(DistrictNoiseMixin):
         index = np.delete(index, loc.dropped_)
         provisional_noise(loc, images[index], poses[index], k)
         return loc, index
-
-    @staticmethod
-    def _novelty_scale(loc: AppearanceLocalizer, images: Any) -> float:
-        sub = np.random.default_rng(0).permutation(len(images))[:_NOVELTY_SAMPLE]
-        u = loc.regressor_.novelty(loc.transform(images[sub]))
-        u = u[np.isfinite(u)]
-        return float(np.median(u)) if len(u) and np.median(u) > 0 else 1.0
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "districts_"):
