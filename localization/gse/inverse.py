@@ -41,7 +41,7 @@ from localization._validation import check_array, check_int, check_real
 from localization.geometry import wrap_angle
 from localization.gse.graph import Array
 
-__all__ = ["feature_whitener", "refine_poses", "verify_poses"]
+__all__ = ["feature_whitener", "refine_poses", "residual_whitener", "verify_poses"]
 
 
 def feature_whitener(cov: ArrayLike) -> Array:
@@ -62,6 +62,40 @@ def feature_whitener(cov: ArrayLike) -> Array:
     except np.linalg.LinAlgError as err:
         raise ValueError("cov must be positive semi-definite (its Cholesky factor failed)") from err
     return np.linalg.solve(C, np.eye(len(R)))
+
+
+def residual_whitener(reg: Any, W: ArrayLike, Theta: ArrayLike) -> Array:
+    """The whitener L (m, m) of the features' residuals about Phi*: :func:`feature_whitener`
+    of the covariance of ``W - Phi*(Theta)`` over the rows where both are finite (e.g. the
+    training split's own, where no held-out noise drive exists; :func:`verify_poses` only
+    compares costs, so only R's shape matters).
+
+    Parameters
+    ----------
+    reg : GSERegressor
+        Fitted; its ``predict_features`` gives Phi*.
+    W : ndarray (n, m)
+        Features.
+    Theta : ndarray (n, d)
+        Their poses in the regressor's coordinates.
+
+    Raises
+    ------
+    ValueError
+        If the shapes disagree or fewer than m + 1 rows have finite residuals.
+    """
+    W = check_array(W, "W", finite=False)
+    Theta = check_array(Theta, "Theta", finite=False)
+    if W.ndim != 2 or Theta.ndim != 2 or len(W) != len(Theta):
+        raise ValueError(f"W (n, m) and Theta (n, d) must have the same rows, got W {W.shape} "
+                         f"and Theta {Theta.shape}")
+    live = _live_rows(W, Theta)
+    E = W[live] - reg.predict_features(Theta[live]) if len(live) else W[:0]
+    E = E[np.all(np.isfinite(E), axis=1)]
+    if len(E) <= W.shape[1]:
+        raise ValueError(f"residual_whitener needs more than m = {W.shape[1]} rows with finite "
+                         f"residuals W - Phi*(Theta), got {len(E)}")
+    return feature_whitener(np.cov(E.T))
 
 
 def refine_poses(reg: Any, W: ArrayLike, theta0: ArrayLike, whitener: ArrayLike,

@@ -15,7 +15,15 @@ the three regressors features -> pose of Table II, every hyper-parameter chosen 
 - ``"knr"``: :class:`~localization.baselines.KernelRegressor` (the paper's KNR: one
   global LOO bandwidth), feature standardisation on/off by CV;
 - ``"knn"``: :class:`~localization.baselines.RetrievalRegressor` (image retrieval), k by
-  CV inside ``fit``, standardisation by CV.
+  CV inside ``fit``, standardisation by CV;
+- ``"gse_verified"`` (with ``verify`` > 0, the same fitted GSE): psi*(w) checked against the
+  poses of the ``verify`` training images nearest in feature space and replaced by one whose
+  Phi* explains w ``verify_margin`` times better
+  (:func:`~localization.gse.inverse.verify_poses`, the whitener from the training split's
+  own residuals about Phi*, :func:`~localization.gse.inverse.residual_whitener`): the
+  retrieve-and-verify step of :meth:`AppearanceLocalizer.predict(verify=...)
+  <localization.localizer.AppearanceLocalizer.predict>`, for gross errors of psi* (a fold,
+  a look-alike place).
 
 The feature dimension (leading PCA components) is chosen per method by the same CV
 (``feature_dims``), and so is the feature *variant* (``variants``: e.g. the same PCA features
@@ -33,8 +41,10 @@ from typing import Any
 
 import numpy as np
 
+from localization._validation import check_int, check_real
 from localization.baselines import KernelRegressor, RetrievalRegressor
 from localization.geometry import Array
+from localization.gse.inverse import residual_whitener, verify_poses
 from localization.gse.regressor import GSERegressor
 from localization.metrics import angular_rmse, rrmse
 from localization.model_selection import grid_search
@@ -105,6 +115,7 @@ def evaluate_methods(W_tr: Array, P_tr: Array, W_te: Array, P_te: Array, q: int,
                      methods: tuple[str, ...] = ("gse", "knr", "knn"),
                      feature_dims: tuple[int, ...] | None = None,
                      variants: dict[str, tuple[Array, Array]] | None = None,
+                     verify: int = 0, verify_margin: float = 3.0,
                      ) -> tuple[list[MethodResult], dict[str, Array], dict[str, Any]]:
     """Fit every method on the training split (hyper-parameters by CV there) and score it
     on the test split. Returns the results, the test predictions and the fitted models,
@@ -118,7 +129,13 @@ def evaluate_methods(W_tr: Array, P_tr: Array, W_te: Array, P_te: Array, q: int,
     ``variants``: other versions of the features, name -> (train, test) arrays of the same
     shapes (e.g. :func:`whitened`), tried beside ``"plain"`` (``W_tr``, ``W_te``); each
     method's CV chooses one, recorded in ``params["variant"]`` (only when variants are given).
+
+    ``verify`` > 0 (with "gse" among the methods): also ``"gse_verified"``, the same GSE
+    model's psi* verified against ``verify`` retrieved training poses with
+    ``verify_margin`` (see the module docstring); no extra fit.
     """
+    verify = check_int(verify, "verify", low=0)
+    verify_margin = check_real(verify_margin, "verify_margin", low=1.0)
     out, preds, models = [], {}, {}
     dims = [W_tr.shape[1]] if feature_dims is None else sorted(
         {min(int(m), W_tr.shape[1]) for m in feature_dims})
@@ -158,7 +175,29 @@ def evaluate_methods(W_tr: Array, P_tr: Array, W_te: Array, P_te: Array, q: int,
         heading = angular_rmse(pred[:, 2], P_te[:, 2]) if P_te.shape[1] > 2 else None
         out.append(MethodResult(name, heading_rmse=heading, params=params, cv=rows,
                                 fit_s=fit_s, **position_errors(pred, P_te)))
+        if name == "gse" and verify:
+            sets_m = [a[:, :params["n_features"]] for a in sets[params.get("variant", "plain")]]
+            t0 = time.perf_counter()
+            pred, switched = _verified(model, sets_m[0], P_tr, sets_m[1], pred, verify,
+                                       verify_margin)
+            preds["gse_verified"], models["gse_verified"] = pred, model
+            heading = angular_rmse(pred[:, 2], P_te[:, 2]) if P_te.shape[1] > 2 else None
+            out.append(MethodResult("gse_verified", heading_rmse=heading,
+                                    params={**params, "verify": verify,
+                                            "verify_margin": verify_margin,
+                                            "switched": int(switched.sum())},
+                                    fit_s=time.perf_counter() - t0,
+                                    **position_errors(pred, P_te)))
     return out, preds, models
+
+
+def _verified(model: GSERegressor, W_tr: Array, P_tr: Array, W_te: Array, theta0: Array,
+              n_candidates: int, margin: float) -> tuple[Array, Array]:
+    """psi* of the test rows ``theta0`` verified against ``n_candidates`` retrieved training
+    poses (:func:`~localization.gse.inverse.verify_poses`; the whitener of the training
+    residuals about Phi*) and the rows switched."""
+    L = residual_whitener(model, W_tr, P_tr)
+    return verify_poses(model, W_te, theta0, L, n_candidates, margin)
 
 
 def _fit_method(name: str, W_tr: Array, P_tr: Array, q: int, periodic: tuple[int, ...],

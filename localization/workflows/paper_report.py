@@ -152,16 +152,18 @@ def tables_markdown(report: dict[str, Any]) -> str:
         lines.append(_table1_row(f"{cam}, random 3-DoF poses", t, ("-",) * 3, route=False))
     rrmse = "RRMSE = sqrt(sum |theta_hat - theta|^2 / sum |theta - mean theta|^2) over (x, y)"
     lines += ["", "## Table 2: localization along the route (position only), " + rrmse, "",
-              ("| camera | features | GSE | KNR | kNN | GSE / KNR | GSE median error (m) | "
-              "KNR median error (m) | paper GSE | paper KNR |"),
-              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+              ("| camera | features | GSE | GSE, verified | KNR | kNN | GSE / KNR | "
+              "verified / KNR | GSE median error (m) | KNR median error (m) | paper GSE | "
+              "paper KNR |"),
+              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for (cam, feat), m in _rows(report, "route").items():
-        g, k, n = (m.get(x) for x in ("gse", "knr", "knn"))
+        g, v, k, n = (m.get(x) for x in ("gse", "gse_verified", "knr", "knn"))
         p = PAPER_TABLE2.get(cam, (None, None))
-        ratio = g["rrmse"] / k["rrmse"] if g and k else None
-        cells = _best_bold([x["rrmse"] if x else None for x in (g, k, n)])
+        ratios = [a["rrmse"] / k["rrmse"] if a and k else None for a in (g, v)]
+        cells = _best_bold([x["rrmse"] if x else None for x in (g, v, k, n)])
         lines.append(f"| {cam} | {FEATURE_NAMES.get(feat, feat)} | {' | '.join(cells)} | "
-                     f"{_fmt(ratio, 2)} | {_fmt(g and g['median_m'], 3)} | "
+                     f"{_fmt(ratios[0], 2)} | {_fmt(ratios[1], 2)} | "
+                     f"{_fmt(g and g['median_m'], 3)} | "
                      f"{_fmt(k and k['median_m'], 3)} | {_fmt(p[0], 3)} | {_fmt(p[1], 3)} |")
     rand = _rows(report, "random")
     if rand:

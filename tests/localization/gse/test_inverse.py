@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from localization.geometry import wrap_angle
-from localization.gse.inverse import feature_whitener, refine_poses, verify_poses
+from localization.gse.inverse import feature_whitener, refine_poses, residual_whitener, verify_poses
 from localization.gse.regressor import GSERegressor
 from localization.synthetic import regression_manifold
 
@@ -110,3 +110,19 @@ def test_verification_keeps_rows_out_of_domain_and_names_bad_inputs(pose3):
         verify_poses(reg, W[:2], reg.predict(W[:2]), L, n_candidates=0)
     with pytest.raises(ValueError, match="margin"):
         verify_poses(reg, W[:2], reg.predict(W[:2]), L, margin=0.5)
+
+
+def test_residual_whitener_whitens_the_residuals_about_phi(pose3):
+    """L of the residuals W - Phi*(Theta) makes their covariance the identity; rows whose
+    pose is out of the domain are left out, and too few finite rows or shapes that disagree
+    are named."""
+    W, T, reg = pose3
+    Theta = T.copy()
+    Theta[0] = np.nan
+    L = residual_whitener(reg, W, Theta)
+    E = (W - reg.predict_features(T))[1:]
+    np.testing.assert_allclose(np.cov((E @ L.T).T), np.eye(W.shape[1]), atol=1e-6)
+    with pytest.raises(ValueError, match="W .n, m. and Theta .n, d. must have the same rows"):
+        residual_whitener(reg, W[:5], T[:4])
+    with pytest.raises(ValueError, match="more than m = .* finite residuals"):
+        residual_whitener(reg, W[:3], T[:3])

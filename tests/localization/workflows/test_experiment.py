@@ -58,3 +58,30 @@ def test_whitened_scales_by_the_training_columns():
     np.testing.assert_allclose(a[:, :2].std(axis=0), 1.0)
     np.testing.assert_array_equal(a[:, 2], 0.0)  # a constant column is left alone
     np.testing.assert_array_equal(b, a[:5])
+
+
+def test_verified_gse_reuses_the_model_and_switches_only_to_training_poses():
+    """``verify``: a "gse_verified" row from the same GSE model (no second fit); its
+    predictions are psi*'s except where a retrieved training pose replaced them, and an
+    unreachable margin switches nothing; a negative ``verify`` is named."""
+    W, T, _, _ = route_manifold(300, seed=0, lateral=0.001)
+    Wt, Tt, _, _ = route_manifold(100, seed=1, lateral=0.001)
+    common = {"q": 1, "cv": 2, "gse_grid": {"n_neighbors": [12]}, "methods": ("gse",)}
+    # margin 1: any candidate that explains w better replaces psi* (measured: 3 of 100)
+    res, preds, models = evaluate_methods(W, T, Wt, Tt, verify=10, verify_margin=1.0, **common)
+    by = {r.method: r for r in res}
+    assert set(by) == set(preds) == {"gse", "gse_verified"}
+    assert models["gse_verified"] is models["gse"]
+    v = by["gse_verified"].params
+    assert (v["verify"], v["verify_margin"], v["n_features"]) == (10, 1.0,
+                                                                 by["gse"].params["n_features"])
+    moved = np.any(preds["gse_verified"] != preds["gse"], axis=1)
+    assert moved.sum() == v["switched"] > 0
+    train = {tuple(p) for p in T}
+    assert all(tuple(p) in train for p in preds["gse_verified"][moved])
+    assert np.isclose(by["gse_verified"].rrmse,
+                      position_errors(preds["gse_verified"], Tt)["rrmse"])
+    res, preds, _ = evaluate_methods(W, T, Wt, Tt, verify=10, verify_margin=1e12, **common)
+    np.testing.assert_array_equal(preds["gse_verified"], preds["gse"])
+    with pytest.raises(ValueError, match="verify"):
+        evaluate_methods(W, T, Wt, Tt, verify=-1, **common)

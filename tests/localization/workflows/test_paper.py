@@ -65,9 +65,16 @@ def test_quick_run_writes_the_tables_and_figures(quick_run: Path) -> None:
     # on the route, 2.10-2.84 at random poses; it reads low on small samples)
     assert all(t["global_seeds"] == [1] * 5 for t in report["table1"].values())
     assert all(min(t["global_seeds"]) >= 2 for t in report["table1_random"].values())
-    # 3 cameras x 2 data sets x 3 feature extractors x 3 methods
-    assert len(report["table2"]) == 54
+    # 3 cameras x 2 data sets x 3 feature extractors x 3 methods, and GSE verified on the
+    # route's 9 rows (the same model: its feature choice, a count of switched test images)
+    assert len(report["table2"]) == 54 + 9
     route = [r for r in report["table2"] if r["dataset"] == "route"]
+    gse = {(r["camera"], r["features"]): r["params"] for r in route if r["method"] == "gse"}
+    verified = [r for r in route if r["method"] == "gse_verified"]
+    assert len(verified) == 9 and all(
+        r["params"]["n_features"] == gse[r["camera"], r["features"]]["n_features"]
+        and 0 <= r["params"]["switched"] <= 150 and r["rrmse"] > 0 for r in verified)
+    assert "| GSE, verified |" in tables
     assert all(r["params"]["variant"] in ("plain", "whitened") for r in route
                if r["features"] != "small_cnn")
     assert all("variant" not in r["params"] for r in route if r["features"] == "small_cnn")
