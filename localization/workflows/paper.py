@@ -95,7 +95,9 @@ class PaperConfig:
                 "images nearest in feature space (experiment.evaluate_methods(verify=...), "
                 "margin 3: the values the appearance benchmark chose on tuning cities 11-12; "
                 "kept at stop 78 on tuning city 11, where it cut the fisheye ImageNet RRMSE "
-                "0.053 -> 0.008 and the perspective SmallCNN 0.043 -> 0.004); 0: psi* alone"})
+                "0.053 -> 0.008 and the perspective SmallCNN 0.043 -> 0.004; on city 0 it moves "
+                "no target and the perspective ImageNet row gets worse, 0.0104 -> 0.0228, "
+                "docs/results.md); the psi* column stays; 0: psi* alone"})
     datasets: str = field(default="route,random", metadata={"help": "route and/or random"})
     cv: int = field(default=3, metadata={"help": "cross-validation folds on the training split"})
     intrinsic_samples: int = field(default=2000, metadata={
