@@ -54,7 +54,6 @@ from localization.turned_views import check_turn_camera, turned_prediction
 __all__ = ["District", "DistrictLocalizer", "district_cells", "transform_maps"]
 
 
-
 def district_cells(poses: ArrayLike, grid: tuple[int, int]) -> Array:
     """Cells (K, 4) ``[x0, y0, x1, y1]`` of a ``grid`` (nx, ny) split of the poses' bounding
     box, row by row (y), K = nx * ny."""
